@@ -1,0 +1,90 @@
+"""The exception tree of routing_svc.
+
+::
+
+    RoutingSvcError
+    ├── InvalidInput            bad values (NaN, inf, negative speeds, bad options)
+    │   └── UnmetRequirement    a target needs types the fleet cannot provide
+    ├── NotFound
+    │   ├── UnknownFleet
+    │   ├── UnknownNetwork
+    │   ├── UnknownEdge
+    │   └── UnknownVehicleType
+    ├── Unreachable             a target that no vehicle can reach
+    ├── OffNetwork              a coordinate too far from any usable edge
+    ├── InvalidNetwork          a network file that cannot be used (malformed, hostile, empty)
+    ├── Conflict                an id that already exists, an idempotency key reused for other input
+    ├── PayloadTooLarge         a body or a decompressed file beyond the configured limit
+    ├── StorageError            the store refused to work (e.g. unsafe durability settings)
+    └── ReplayMismatch          a replay of the event log disagrees with the stored state
+
+Every layer raises these; the service maps each class to one HTTP status in one place.
+"""
+
+from __future__ import annotations
+
+
+class RoutingSvcError(Exception):
+    """Base class of every error that routing_svc raises on purpose."""
+
+    title = "Routing service error"
+
+    def __init__(self, detail: str) -> None:
+        super().__init__(detail)
+        self.detail = detail
+
+
+class InvalidInput(RoutingSvcError):
+    title = "Invalid input"
+
+
+class UnmetRequirement(InvalidInput):
+    title = "Requirement cannot be met"
+
+
+class NotFound(RoutingSvcError):
+    title = "Not found"
+
+
+class UnknownFleet(NotFound):
+    title = "Unknown fleet"
+
+
+class UnknownNetwork(NotFound):
+    title = "Unknown network"
+
+
+class UnknownEdge(NotFound):
+    title = "Unknown edge"
+
+
+class UnknownVehicleType(NotFound):
+    title = "Unknown vehicle type"
+
+
+class Unreachable(RoutingSvcError):
+    title = "Target unreachable"
+
+
+class OffNetwork(RoutingSvcError):
+    title = "Position off the network"
+
+
+class InvalidNetwork(RoutingSvcError):
+    title = "Invalid network"
+
+
+class Conflict(RoutingSvcError):
+    title = "Conflict"
+
+
+class PayloadTooLarge(RoutingSvcError):
+    title = "Payload too large"
+
+
+class StorageError(RoutingSvcError):
+    title = "Storage error"
+
+
+class ReplayMismatch(RoutingSvcError):
+    title = "Replay mismatch"

@@ -1,0 +1,118 @@
+"""The contract between the SA core and a space (the plane, a road network).
+
+The core never computes a distance itself. A *space* answers two questions:
+
+1. ``assign``: for a target and a fleet, which vehicles reach it first, one
+   group of vehicles per required type, with their travel times, and which of
+   them arrives last (the vehicle that moves, section IV-C of the paper);
+2. ``advance``: move a position a given cost along the route found by
+   ``assign`` toward the target.
+
+Vehicle times are ``D / speed`` where ``D`` is the space's cost (metres, or
+seconds at the reference speed) and ``speed`` is the vehicle's relative speed
+factor (1.0 = the reference speed). Ties break by the lower vehicle index; the
+fleet keeps vehicles sorted by id, so ties break by vehicle id.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Generic, Protocol, TypeVar
+
+import numpy as np
+import numpy.typing as npt
+
+P = TypeVar("P")
+P_co = TypeVar("P_co", covariant=True)
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True, slots=True)
+class Requirement:
+    """How many vehicles of each group a target needs.
+
+    Attributes
+    ----------
+    vehicle_groups : IntArray
+        Group code of every vehicle (index = vehicle index); ``-1`` for a
+        vehicle that belongs to no requested group.
+    counts : IntArray
+        ``counts[g]`` vehicles of group ``g`` are needed, for every group
+        ``g`` in ``range(len(counts))``.
+
+    A target of type ``ab`` in a fleet with types A and B has
+    ``counts = [1, 1]`` and ``vehicle_groups[i] = 0`` for A vehicles, ``1``
+    for B vehicles. "Any one vehicle" is ``counts = [1]`` with every vehicle
+    in group 0.
+    """
+
+    vehicle_groups: IntArray
+    counts: IntArray
+
+
+@dataclass(frozen=True, slots=True)
+class Assignment(Generic[P]):
+    """What a space found for one target.
+
+    Attributes
+    ----------
+    served_by : tuple[int, ...]
+        Vehicle indices that serve the target, grouped by requirement group
+        (group 0 first), closest first within a group.
+    times : tuple[float, ...]
+        Travel time ``D_i / v_i`` of each vehicle in ``served_by``.
+    mover : int
+        Index of the vehicle that arrives last (largest time; ties: lower index).
+    completion_time : float
+        The mover's travel time: the time at which the target is served.
+    mover_cost : float
+        The mover's path cost ``D`` (before dividing by its speed).
+    route : object
+        Opaque data the space needs to move the mover along its path.
+    """
+
+    served_by: tuple[int, ...]
+    times: tuple[float, ...]
+    mover: int
+    completion_time: float
+    mover_cost: float
+    route: object
+
+
+class Space(Protocol[P]):
+    """A metric-like space (possibly directed) that the SA core runs on."""
+
+    def assign(
+        self,
+        target: P,
+        positions: list[P],
+        speeds: FloatArray,
+        requirement: Requirement,
+    ) -> Assignment[P]:
+        """Find the serving vehicles for ``target``; raise ``Unreachable`` or
+        ``UnmetRequirement`` when there are none. Never changes state."""
+        ...
+
+    def advance(self, position: P, target: P, route: object, amount: float) -> P:
+        """Move ``position`` a cost ``amount`` (0 <= amount <= D) along ``route``
+        toward ``target`` and return the new position."""
+        ...
+
+    def perturb(self, position: P, amount: float, rng: np.random.Generator) -> P:
+        """Move ``position`` a cost ``amount`` in a random direction (annealing noise)."""
+        ...
+
+    def typical_cost(self) -> float:
+        """A cost scale of the space: the length of a typical trip, used to
+        derive default step sizes so that no tuning is needed."""
+        ...
+
+    def encode(self, position: P) -> dict[str, object]:
+        """A JSON-ready form of a position that round-trips exactly."""
+        ...
+
+    def decode(self, data: dict[str, object]) -> P:
+        """Inverse of :meth:`encode`; raise ``InvalidInput``/``UnknownEdge`` on bad data."""
+        ...
