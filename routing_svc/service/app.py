@@ -1,0 +1,97 @@
+"""The FastAPI application: ``create_app(settings)``; nothing heavy at import time."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from pathlib import Path
+
+from fastapi import FastAPI
+from fastapi.middleware.cors import CORSMiddleware
+
+from routing_svc import __version__
+from routing_svc.errors import StorageError
+from routing_svc.service.demo import ensure_demo_fleet, feed_demo_targets
+from routing_svc.service.fleets import FleetService
+from routing_svc.service.guards import Guards
+from routing_svc.service.networks import NetworkRegistry
+from routing_svc.service.problems import install_problem_handlers
+from routing_svc.service.routes import fleets, health, networks, targets
+from routing_svc.service.settings import Settings
+from routing_svc.store import EventLog
+
+
+def load_networks(registry: NetworkRegistry, log: EventLog, settings: Settings) -> None:
+    """Load the start-up networks and every network registered in the database."""
+    for name, path in settings.networks.items():
+        entry = registry.load(name, Path(path), name=name)
+        known = {n.id: n for n in log.list_networks()}
+        if name in known:
+            if known[name].sha256 != entry.network.source_sha256:
+                raise StorageError(
+                    f"network {name!r} is stored with other content (sha256 {known[name].sha256}) "
+                    f"than {path}; fleets on it would not replay. Use another name."
+                )
+        else:
+            log.create_network(
+                name, sha256=entry.network.source_sha256, path=str(Path(path).resolve()), name=name
+            )
+    for record in log.list_networks():
+        if record.id not in registry and Path(record.path).is_file():
+            registry.load(record.id, Path(record.path), name=record.name)
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """Build the application; the lifespan opens the store and loads networks."""
+    settings = settings or Settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        log = EventLog(settings.database_url).open()
+        registry = NetworkRegistry(
+            data_dir=settings.data_dir, max_bytes=settings.max_network_bytes
+        )
+        feeder: asyncio.Task[None] | None = None
+        try:
+            load_networks(registry, log, settings)
+            service = FleetService(log, registry, recent_window=settings.recent_window)
+            app.state.settings = settings
+            app.state.networks = registry
+            app.state.fleets = service
+            if settings.demo_fleet and registry.all():
+                ensure_demo_fleet(service, registry.all()[0])
+                if settings.demo_rate > 0:
+                    feeder = asyncio.create_task(feed_demo_targets(service, settings.demo_rate))
+            yield
+        finally:
+            if feeder is not None:
+                feeder.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await feeder
+            log.close()
+
+    app = FastAPI(
+        title="routing_svc",
+        version=__version__,
+        summary="Keeps a vehicle fleet where it is needed (stochastic approximation on road networks).",
+        lifespan=lifespan,
+    )
+    install_problem_handlers(app)
+    for router in (health.router, networks.router, fleets.router, targets.router):
+        app.include_router(router)
+    app.add_middleware(
+        Guards,
+        max_body_bytes=settings.max_body_bytes,
+        max_upload_bytes=settings.max_network_bytes,
+        api_key=settings.api_key,
+    )
+    if settings.cors_origins:
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=settings.cors_origins,
+            allow_methods=["GET", "POST", "PUT", "DELETE"],
+            allow_headers=["Content-Type", "Idempotency-Key", "X-API-Key"],
+        )
+    return app

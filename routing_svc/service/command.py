@@ -1,0 +1,99 @@
+"""``routing-svc serve``: the service under uvicorn."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+from typing import Any
+
+from routing_svc.errors import InvalidInput
+
+
+def _net_option(text: str) -> tuple[str, str]:
+    name, sep, path = text.partition("=")
+    if not sep:
+        name = path = text
+    if not name or not path:
+        raise argparse.ArgumentTypeError(f"--net takes NAME=PATH or NAME, got {text!r}")
+    return name, path
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "serve",
+        help="run the REST service (SQLite by default) with the dashboard",
+        description="Run the fleet service. With no --net, the DRT district network that "
+        "eclipse-sumo ships is loaded as 'drt' and a demo fleet is created.",
+    )
+    p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--port", type=int, default=8000)
+    p.add_argument("--db", type=Path, default=None, help="SQLite file (default var/routing_svc.db)")
+    p.add_argument(
+        "--database-url", default=None, help="SQLAlchemy URL, e.g. postgresql+psycopg://..."
+    )
+    p.add_argument(
+        "--net",
+        action="append",
+        default=[],
+        metavar="NAME=PATH",
+        type=_net_option,
+        help="a network to load (repeatable); NAME=PATH, PATH may be a known name (drt, grid, ...)",
+    )
+    p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--api-key", default=os.environ.get("ROUTING_SVC_API_KEY"))
+    p.add_argument("--cors-origin", action="append", default=[])
+    p.add_argument("--data-dir", type=Path, default=Path("var/networks"))
+    p.add_argument("--no-demo", action="store_true", help="do not create the demo fleet")
+    p.add_argument("--demo-rate", type=float, default=1.0, help="demo targets per second (0: off)")
+    p.add_argument("--log-level", default="info")
+    p.set_defaults(run=run)
+
+
+def settings_env(args: argparse.Namespace) -> dict[str, str]:
+    """The settings as environment variables, so that every uvicorn worker reads them."""
+    import json
+
+    from routing_svc.nets import resolve_network
+
+    if args.database_url and args.db:
+        raise InvalidInput("give --db or --database-url, not both")
+    url = args.database_url or os.environ.get("DATABASE_URL")
+    if url is None:
+        db = args.db or Path("var/routing_svc.db")
+        db.parent.mkdir(parents=True, exist_ok=True)
+        url = f"sqlite:///{db.resolve()}"
+    nets = dict(args.net) or {"drt": "drt"}
+    resolved = {name: str(resolve_network(path)) for name, path in nets.items()}
+    if args.demo_rate < 0:
+        raise InvalidInput("--demo-rate must be >= 0")
+    env = {
+        "DATABASE_URL": url,
+        "ROUTING_SVC_NETWORKS": json.dumps(resolved),
+        "ROUTING_SVC_DATA_DIR": str(args.data_dir.resolve()),
+        "ROUTING_SVC_DEMO_FLEET": "false" if args.no_demo else "true",
+        "ROUTING_SVC_DEMO_RATE": str(0.0 if args.no_demo else args.demo_rate),
+        "ROUTING_SVC_CORS_ORIGINS": json.dumps(args.cors_origin),
+    }
+    if args.api_key:
+        env["ROUTING_SVC_API_KEY"] = args.api_key
+    return env
+
+
+def run(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    if args.workers < 1:
+        raise InvalidInput("--workers must be >= 1")
+    os.environ.update(settings_env(args))
+    base = f"http://{args.host}:{args.port}"
+    print(f"routing_svc: API docs at {base}/docs, dashboard at {base}/dashboard", flush=True)
+    uvicorn.run(
+        "routing_svc.service.asgi:app",
+        host=args.host,
+        port=args.port,
+        workers=args.workers,
+        log_level=args.log_level,
+        factory=False,
+    )
+    return 0

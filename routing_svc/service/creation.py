@@ -1,0 +1,81 @@
+"""From a ``POST /v1/fleets`` body to the ``fleet_created`` event payload.
+
+Everything that needs a choice is decided here, once, and stored: snapped
+starting positions, the default step schedule (derived from the network's
+typical trip cost, see :func:`routing_svc.sa.schedules.default_schedule`),
+the optimum start and the reference optimum. Replay then needs none of it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from routing_svc.errors import InvalidInput
+from routing_svc.sa import Annealing, FleetConfig, Objective, default_schedule
+from routing_svc.sa.schedules import Counting, schedule_from_dict
+from routing_svc.service.networks import NetworkEntry
+from routing_svc.service.reference import (
+    build_demand,
+    describe_spec,
+    optimum_start,
+    solve_reference,
+)
+from routing_svc.service.schemas import FleetSpec
+from routing_svc.types import NetPosition
+
+
+def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any]:
+    """Validate a fleet spec against its network and fix every derived value."""
+    objective = Objective.parse(spec.objective)
+    space = entry.space(spec.cost)
+    n = len(spec.vehicles)
+    missing = [v.id for v in spec.vehicles if v.position is None]
+    if spec.start is None and missing:
+        raise InvalidInput(
+            f"vehicles {missing[:5]} have no position; give positions or start from the optimum"
+        )
+    if spec.start is not None and len(missing) != n:
+        raise InvalidInput("with 'start', leave every vehicle's position out")
+    if spec.start is not None:
+        sample = [entry.resolve(p) for p in spec.start.optimum.sample]
+        positions: list[NetPosition] = optimum_start(
+            entry, cost=spec.cost, sample=sample, vehicles=n, power=objective.power
+        )
+        # deterministic pairing: vehicles in id order take the sites in edge order
+        positions.sort()
+        ordered = sorted(spec.vehicles, key=lambda v: v.id)
+        starts = {v.id: p for v, p in zip(ordered, positions, strict=True)}
+    else:
+        starts = {v.id: entry.resolve(v.position) for v in spec.vehicles if v.position}
+    schedule = (
+        schedule_from_dict(spec.step.to_dict())
+        if spec.step is not None
+        else default_schedule(typical_cost=space.typical_cost(), n_vehicles=n, power=objective.power)
+    )
+    config = FleetConfig(
+        objective=objective,
+        schedule=schedule,
+        counting=Counting(spec.counting),
+        annealing=None
+        if spec.annealing is None
+        else Annealing(spec.annealing.scale, spec.annealing.decay),
+        seed=spec.seed,
+    )
+    reference = None
+    if spec.reference_demand is not None:
+        demand_spec = describe_spec(spec.reference_demand)
+        demand = build_demand(entry, demand_spec)
+        _, optimum = solve_reference(
+            entry, cost=spec.cost, demand=demand, vehicles=n, power=objective.power
+        )
+        reference = {"demand": demand_spec, "optimum": optimum}
+    return {
+        "network": entry.id,
+        "cost": spec.cost,
+        "config": config.to_dict(),
+        "vehicles": [
+            {"id": v.id, "type": v.type, "speed": v.speed, "position": space.encode(starts[v.id])}
+            for v in spec.vehicles
+        ],
+        "reference": reference,
+    }

@@ -1,0 +1,173 @@
+"""The networks the service knows: compiled graphs, spaces and snappers."""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from routing_svc.errors import InvalidInput, InvalidNetwork, UnknownEdge, UnknownNetwork
+from routing_svc.network import CompiledNetwork, RoadSpace, Snapper, load_network
+from routing_svc.network.safe_xml import check_net_xml_file, read_net_bytes
+from routing_svc.service.schemas import EdgePosition, LonLatPosition, Position, XYPosition
+from routing_svc.types import NetPosition
+
+SNAP_DISTANCE_M = 500.0
+"""Coordinates farther than this from every usable edge are off the network."""
+
+
+@dataclass
+class NetworkEntry:
+    """One loaded network with its spaces (one per cost kind) and snapper."""
+
+    id: str
+    name: str
+    path: Path
+    network: CompiledNetwork
+    snapper: Snapper
+    _spaces: dict[str, RoadSpace] = field(default_factory=dict)
+    _geometry: dict[str, Any] | None = None
+
+    def space(self, cost: str) -> RoadSpace:
+        """The free-flow space for ``cost`` (``length`` or ``time``), built once."""
+        if cost not in ("length", "time"):
+            raise InvalidInput(f"cost must be 'length' or 'time', got {cost!r}")
+        if cost not in self._spaces:
+            self._spaces[cost] = RoadSpace(self.network, cost=cost)  # type: ignore[arg-type]
+        return self._spaces[cost]
+
+    def resolve(self, position: Position) -> NetPosition:
+        """A position from the API (edge/offset, x/y or lon/lat) on this network."""
+        if isinstance(position, EdgePosition):
+            index = self.network.edge_index.get(position.edge)
+            if index is None:
+                raise UnknownEdge(
+                    f"edge {position.edge!r} is not a usable edge of network {self.id!r}"
+                )
+            length = float(self.network.length[index])
+            if position.offset > length:
+                raise InvalidInput(
+                    f"offset {position.offset} is beyond the end of edge {position.edge!r} "
+                    f"(length {length})"
+                )
+            return NetPosition(index, float(position.offset))
+        if isinstance(position, XYPosition):
+            return self.snapper.snap_xy([position.x], [position.y], max_distance=SNAP_DISTANCE_M)[0]
+        if isinstance(position, LonLatPosition):
+            return self.snapper.snap_lonlat(
+                [position.lon], [position.lat], max_distance=SNAP_DISTANCE_M
+            )[0]
+        raise InvalidInput("unknown position form")
+
+    def describe(self, position: NetPosition) -> dict[str, Any]:
+        """``edge, offset, x, y`` (and ``lon, lat`` where the network has a projection)."""
+        space = self.space("length")
+        x, y = space.xy(position)
+        out: dict[str, Any] = {
+            "edge": self.network.edge_ids[position.edge],
+            "offset": position.offset,
+            "x": x,
+            "y": y,
+        }
+        if self.network.projection is not None:
+            lon, lat = space.lonlat(position)
+            out["lon"] = lon
+            out["lat"] = lat
+        return out
+
+    def summary(self) -> dict[str, Any]:
+        """The network as ``GET /v1/networks/{id}`` shows it."""
+        net = self.network
+        red = net.reduction
+        return {
+            "id": self.id,
+            "name": self.name,
+            "junctions": net.n_junctions,
+            "edges": net.n_edges,
+            "usable_edges": red.usable_edges,
+            "dropped_edges": red.dropped_edges,
+            "bounds": list(net.bounds),
+            "has_projection": net.projection is not None,
+            "sha256": net.source_sha256,
+            "vclass": net.vclass,
+        }
+
+    def geometry(self) -> dict[str, Any]:
+        """GeoJSON FeatureCollection of the usable edges in network coordinates."""
+        if self._geometry is None:
+            net = self.network
+            features = []
+            for i, edge_id in enumerate(net.edge_ids):
+                pts = net.shape_xy[net.shape_offsets[i] : net.shape_offsets[i + 1]]
+                features.append(
+                    {
+                        "type": "Feature",
+                        "geometry": {
+                            "type": "LineString",
+                            "coordinates": [[round(float(x), 2), round(float(y), 2)] for x, y in pts],
+                        },
+                        "properties": {
+                            "id": edge_id,
+                            "length": float(net.length[i]),
+                            "speed": float(net.speed[i]),
+                        },
+                    }
+                )
+            self._geometry = {
+                "type": "FeatureCollection",
+                "bbox": list(net.bounds),
+                "features": features,
+            }
+        return self._geometry
+
+
+class NetworkRegistry:
+    """Networks by id: named at start-up or uploaded (kept under ``data_dir``)."""
+
+    def __init__(self, *, data_dir: Path, max_bytes: int) -> None:
+        self.data_dir = data_dir
+        self.max_bytes = max_bytes
+        self._entries: dict[str, NetworkEntry] = {}
+        self._lock = threading.Lock()
+
+    def __contains__(self, network_id: str) -> bool:
+        return network_id in self._entries
+
+    def get(self, network_id: str) -> NetworkEntry:
+        try:
+            return self._entries[network_id]
+        except KeyError:
+            raise UnknownNetwork(f"no network {network_id!r}") from None
+
+    def all(self) -> list[NetworkEntry]:
+        return [self._entries[k] for k in sorted(self._entries)]
+
+    def load(self, network_id: str, path: Path, *, name: str | None = None) -> NetworkEntry:
+        """Load (or return the already loaded) network from a file."""
+        with self._lock:
+            if network_id in self._entries:
+                return self._entries[network_id]
+            if not path.is_file():
+                raise UnknownNetwork(f"network file {str(path)!r} does not exist")
+            check_net_xml_file(path)
+            network = load_network(path)
+            entry = NetworkEntry(network_id, name or network_id, path, network, Snapper(network))
+            self._entries[network_id] = entry
+            return entry
+
+    def store_upload(self, data: bytes) -> tuple[str, Path]:
+        """Check an uploaded network and write it under ``data_dir``; return its hash and path."""
+        if not data:
+            raise InvalidNetwork("empty upload: send the bytes of a .net.xml or .net.xml.gz")
+        xml = read_net_bytes(data, max_bytes=self.max_bytes)
+        digest = hashlib.sha256(xml).hexdigest()
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        path = self.data_dir / f"{digest}.net.xml"
+        if not path.exists():
+            tmp = path.with_suffix(".tmp")
+            tmp.write_bytes(xml)
+            tmp.replace(path)
+        return digest, path
+

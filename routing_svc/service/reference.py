@@ -1,0 +1,104 @@
+"""Reference demand, the optimum it implies, and starting at that optimum.
+
+A fleet may be given a *reference demand* (the true or assumed distribution of
+targets). The service then solves the p-median for it once, at creation
+(``routing_svc.optimum``: exact MILP for small candidate sets, greedy plus
+interchange beyond), stores the optimum in the ``fleet_created`` event, and
+reports the gap of the current configuration on ``/metrics`` with the exact
+expected cost (no sampling).
+
+The optimum ignores vehicle types and speeds (every vehicle is taken to serve
+any target at unit speed); for homogeneous fleets it is the exact objective
+the SA minimises.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from routing_svc.demand import DemandDistribution
+from routing_svc.demand import network as network_demand
+from routing_svc.errors import InvalidInput
+from routing_svc.optimum import candidate_sites, expected_cost, solve_pmedian
+from routing_svc.service.networks import NetworkEntry
+from routing_svc.service.schemas import DemandSpec
+from routing_svc.types import NetPosition
+
+if TYPE_CHECKING:
+    from routing_svc.service.runtime import FleetRuntime
+
+MAX_SITES = 1500
+"""Candidate sites kept for the optimum (subsampled deterministically beyond)."""
+
+
+def build_demand(entry: NetworkEntry, spec: dict[str, Any]) -> DemandDistribution[NetPosition]:
+    """The reference demand of a fleet from its stored spec."""
+    net = entry.network
+    kind = spec["kind"]
+    if kind == "uniform":
+        return network_demand.uniform_by_length(net)
+    if kind == "hotspots":
+        rng = np.random.default_rng(int(spec.get("seed", 0)))
+        return network_demand.hotspot_mixture(
+            net, count=int(spec.get("count", 3)), spread=spec.get("spread"), rng=rng
+        )
+    if kind == "weights":
+        weights = spec.get("weights") or {}
+        return network_demand.from_edge_weights(net, weights)
+    raise InvalidInput(f"unknown reference demand kind {kind!r}")
+
+
+def solve_reference(
+    entry: NetworkEntry,
+    *,
+    cost: str,
+    demand: DemandDistribution[NetPosition],
+    vehicles: int,
+    power: float,
+) -> tuple[list[NetPosition], dict[str, Any]]:
+    """The p-median (power 1) or p-power-median of ``demand`` with ``vehicles`` sites."""
+    space = entry.space(cost)
+    sites = candidate_sites(entry.network, demand, max_sites=MAX_SITES)
+    if len(sites) < vehicles:
+        raise InvalidInput(f"only {len(sites)} candidate sites for {vehicles} vehicles")
+    matrix = space.cost_matrix(list(sites), list(demand.positions)) ** power
+    solution = solve_pmedian(matrix, np.asarray(demand.weights), vehicles)
+    chosen = [sites[i] for i in solution.sites]
+    return chosen, {
+        "objective": solution.objective,
+        "method": solution.method,
+        "proven_optimal": solution.proven_optimal,
+        "seconds": solution.seconds,
+        "sites": len(sites),
+    }
+
+
+def optimum_start(
+    entry: NetworkEntry, *, cost: str, sample: Sequence[NetPosition], vehicles: int, power: float
+) -> list[NetPosition]:
+    """Starting positions at the p-median of a prior demand sample (equal weights)."""
+    demand = DemandDistribution.from_masses("prior-sample", tuple(sample), np.ones(len(sample)))
+    positions, _ = solve_reference(entry, cost=cost, demand=demand, vehicles=vehicles, power=power)
+    return positions
+
+
+def expected_cost_now(runtime: FleetRuntime) -> float:
+    """Exact expected cost of the fleet's current positions under its reference demand."""
+    assert runtime.reference is not None
+    demand = runtime.reference_distribution()
+    fleet = runtime.fleet
+    return expected_cost(
+        runtime.entry.space(runtime.cost_kind),
+        fleet.state.positions,
+        np.ones(len(fleet.vehicles)),
+        demand,
+        power=fleet.config.objective.power,
+    )
+
+
+def describe_spec(spec: DemandSpec) -> dict[str, Any]:
+    """The stored form of a reference demand spec."""
+    return spec.model_dump(exclude_none=True)

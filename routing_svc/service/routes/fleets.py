@@ -1,0 +1,58 @@
+"""``/v1/fleets``: create, read and delete fleets; their event log and metrics."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends, Query, Response
+from starlette.concurrency import run_in_threadpool
+
+from routing_svc.service.deps import fleet_service
+from routing_svc.service.fleets import FleetService
+from routing_svc.service.schemas import FleetSpec
+
+router = APIRouter(prefix="/v1/fleets", tags=["fleets"])
+Service = Annotated[FleetService, Depends(fleet_service)]
+
+
+@router.post("", status_code=201)
+async def create_fleet(spec: FleetSpec, service: Service) -> dict[str, Any]:
+    """Create a fleet on a network (explicit positions or the optimum of a prior sample)."""
+    return await run_in_threadpool(service.create_fleet, spec)
+
+
+@router.get("")
+async def list_fleets(service: Service) -> dict[str, Any]:
+    """Every fleet with its vehicles."""
+    return {"items": await run_in_threadpool(service.list_fleets)}
+
+
+@router.get("/{fleet_id}")
+async def get_fleet(fleet_id: str, service: Service) -> dict[str, Any]:
+    """A fleet: version, vehicles, types and reference positions."""
+    return await run_in_threadpool(service.get_fleet, fleet_id)
+
+
+@router.delete("/{fleet_id}", status_code=204)
+async def delete_fleet(fleet_id: str, service: Service) -> Response:
+    """Delete a fleet (its event log stays as an audit trail; the id is not reused)."""
+    await run_in_threadpool(service.delete_fleet, fleet_id)
+    return Response(status_code=204)
+
+
+@router.get("/{fleet_id}/events")
+async def list_events(
+    fleet_id: str,
+    service: Service,
+    after: Annotated[int, Query(ge=0, le=2**62)] = 0,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+) -> dict[str, Any]:
+    """The fleet's event log, ``limit`` events after ``after``."""
+    items = await run_in_threadpool(service.events, fleet_id, after=after, limit=limit)
+    return {"items": items, "next_after": items[-1]["seq"] if items else after}
+
+
+@router.get("/{fleet_id}/metrics")
+async def fleet_metrics(fleet_id: str, service: Service) -> dict[str, Any]:
+    """Targets applied, mean costs, step sizes, update counts and the gap to the optimum."""
+    return await run_in_threadpool(service.metrics, fleet_id)

@@ -1,0 +1,81 @@
+"""``/v1/networks``: upload, list and draw road networks."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends, Query, Request
+from starlette.concurrency import run_in_threadpool
+
+from routing_svc.errors import Conflict, InvalidNetwork
+from routing_svc.service.deps import fleet_service, network_registry
+from routing_svc.service.fleets import FleetService
+from routing_svc.service.networks import NetworkRegistry
+from routing_svc.service.schemas import Identifier
+
+router = APIRouter(prefix="/v1/networks", tags=["networks"])
+
+NET_BODY = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            "application/xml": {"schema": {"type": "string", "format": "binary"}},
+            "application/gzip": {"schema": {"type": "string", "format": "binary"}},
+        },
+    }
+}
+
+
+@router.post("", status_code=201, openapi_extra=NET_BODY)
+async def upload_network(
+    request: Request,
+    registry: Annotated[NetworkRegistry, Depends(network_registry)],
+    service: Annotated[FleetService, Depends(fleet_service)],
+    name: Annotated[Identifier | None, Query()] = None,
+) -> dict[str, Any]:
+    """Upload a SUMO ``.net.xml`` or ``.net.xml.gz``; it is checked, compiled and kept."""
+    data = await request.body()
+
+    def register() -> dict[str, Any]:
+        digest, path = registry.store_upload(data)
+        network_id = name or digest[:12]
+        if network_id in registry:
+            existing = registry.get(network_id)
+            if existing.network.source_sha256 != digest:
+                raise Conflict(f"network {network_id!r} exists with other content")
+            return existing.summary()
+        try:
+            entry = registry.load(network_id, path, name=name or network_id)
+        except InvalidNetwork:
+            raise
+        service.log.create_network(
+            network_id, sha256=digest, path=str(path), name=entry.name
+        )
+        return entry.summary()
+
+    return await run_in_threadpool(register)
+
+
+@router.get("")
+async def list_networks(
+    registry: Annotated[NetworkRegistry, Depends(network_registry)],
+) -> dict[str, Any]:
+    """Every network the service knows."""
+    return {"items": [e.summary() for e in registry.all()]}
+
+
+@router.get("/{network_id}")
+async def get_network(
+    network_id: str, registry: Annotated[NetworkRegistry, Depends(network_registry)]
+) -> dict[str, Any]:
+    """One network's counts and bounds."""
+    return registry.get(network_id).summary()
+
+
+@router.get("/{network_id}/geometry")
+async def get_geometry(
+    network_id: str, registry: Annotated[NetworkRegistry, Depends(network_registry)]
+) -> dict[str, Any]:
+    """GeoJSON of the usable edges, in the network's own coordinates."""
+    entry = registry.get(network_id)
+    return await run_in_threadpool(entry.geometry)

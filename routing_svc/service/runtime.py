@@ -1,0 +1,241 @@
+"""A fleet as a replayable state machine over its event log.
+
+Events (each with a per-fleet ``seq``; the fleet's ``version`` is the number of
+applied events):
+
+- ``fleet_created`` (seq 1): network, cost, config, vehicles with their
+  starting positions, the optional reference demand and its optimum;
+- ``target``: a snapped target position and its required types; the result is
+  the answer the client got (:meth:`FleetRuntime.apply_target`);
+- ``weights_updated``: per-edge travel times (traffic-driven costs);
+- ``fleet_deleted``.
+
+Applying the same events in the same order gives bit-identical state: every
+input is stored already snapped, results are plain JSON with exact float
+round trips, and the only randomness (annealing) derives from the seed.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import deque
+from collections.abc import Sequence
+from typing import Any
+
+from routing_svc.demand import DemandDistribution
+from routing_svc.errors import Conflict, InvalidInput, ReplayMismatch
+from routing_svc.network import RoadSpace
+from routing_svc.sa import Fleet, FleetConfig, Vehicle
+from routing_svc.service.networks import NetworkEntry
+from routing_svc.types import NetPosition
+
+
+def dumps(data: Any) -> str:
+    """Canonical JSON text (exact float round trip, stable key order)."""
+    return json.dumps(data, separators=(",", ":"), sort_keys=True, allow_nan=False)
+
+
+class FleetRuntime:
+    """The in-memory state of one fleet, advanced only by events."""
+
+    def __init__(self, fleet_id: str, entry: NetworkEntry, created: dict[str, Any], *, recent_window: int) -> None:
+        self.id = fleet_id
+        self.entry = entry
+        self.created = created
+        self.cost_kind: str = created["cost"]
+        self.base_space: RoadSpace = entry.space(self.cost_kind)
+        self.travel_times: dict[str, float] = {}
+        vehicles = [
+            (
+                Vehicle(v["id"], v["type"], float(v["speed"])),
+                self.base_space.decode(v["position"]),
+            )
+            for v in created["vehicles"]
+        ]
+        self.fleet: Fleet[NetPosition] = Fleet.create(
+            self.base_space, vehicles, FleetConfig.from_dict(created["config"])
+        )
+        self.version = 1
+        self.deleted = False
+        self.cost_sum = 0.0
+        self.recent: deque[float] = deque(maxlen=recent_window)
+        self.reference: dict[str, Any] | None = created.get("reference")
+        self._reference_distribution: DemandDistribution[NetPosition] | None = None
+
+    # -- events -----------------------------------------------------------------
+
+    def apply_target(self, target: NetPosition, requires: Sequence[str] | None) -> tuple[str, str]:
+        """Serve one target; return the event's payload and result JSON."""
+        self._check_live()
+        outcome = self.fleet.observe(target, requires)
+        seq = self.version + 1
+        d = outcome.dispatch
+        result = {
+            "seq": seq,
+            "version": seq,
+            "target": self.entry.describe(target),
+            "requires": list(requires) if requires else None,
+            "served_by": list(d.served_by),
+            "times": list(d.times),
+            "moved": d.moved,
+            "cost": d.cost,
+            "objective": d.objective,
+            "step_size": outcome.step_size,
+            "moved_by": outcome.moved_by,
+            "noise": outcome.noise,
+            "new_position": self.entry.describe(outcome.new_position),
+        }
+        payload = {"target": self.base_space.encode(target), "requires": result["requires"]}
+        self.version = seq
+        self.cost_sum += d.cost
+        self.recent.append(d.cost)
+        return dumps(payload), dumps(result)
+
+    def apply_travel_times(self, times: dict[str, float]) -> tuple[str, str]:
+        """Replace per-edge travel times (only for ``cost = time``)."""
+        self._check_live()
+        if self.cost_kind != "time":
+            raise Conflict("this fleet uses length costs; travel times apply to cost='time' fleets")
+        merged = {**self.travel_times, **times}
+        space = self.base_space.with_travel_times(merged)
+        self.travel_times = merged
+        self.fleet.space = space
+        seq = self.version + 1
+        self.version = seq
+        return dumps({"times": times}), dumps({"seq": seq, "version": seq, "edges": len(times)})
+
+    def apply_delete(self) -> tuple[str, str]:
+        self._check_live()
+        seq = self.version + 1
+        self.version = seq
+        self.deleted = True
+        return dumps({}), dumps({"seq": seq, "version": seq})
+
+    def replay(self, seq: int, kind: str, payload_json: str, result_json: str | None) -> None:
+        """Apply a stored event; check that it reproduces the stored result."""
+        if seq != self.version + 1:
+            raise ReplayMismatch(f"fleet {self.id}: event {seq} follows version {self.version}")
+        payload = json.loads(payload_json)
+        if kind == "target":
+            target = self.base_space.decode(payload["target"])
+            _, result = self.apply_target(target, payload["requires"])
+        elif kind == "weights_updated":
+            _, result = self.apply_travel_times(payload["times"])
+        elif kind == "fleet_deleted":
+            _, result = self.apply_delete()
+        else:
+            raise ReplayMismatch(f"fleet {self.id}: unknown event kind {kind!r} at {seq}")
+        if result_json is not None and result != result_json:
+            raise ReplayMismatch(f"fleet {self.id}: event {seq} replays to a different result")
+
+    def _check_live(self) -> None:
+        if self.deleted:
+            raise Conflict(f"fleet {self.id!r} was deleted")
+
+    # -- views ------------------------------------------------------------------
+
+    def snapshot_json(self) -> str:
+        """The whole state as canonical JSON (what replay must reproduce bit for bit)."""
+        return dumps(
+            {
+                "version": self.version,
+                "fleet": self.fleet.snapshot(),
+                "travel_times": self.travel_times,
+                "cost_sum": self.cost_sum,
+                "recent": list(self.recent),
+                "deleted": self.deleted,
+            }
+        )
+
+    def restore(self, snapshot_json: str) -> None:
+        """Load :meth:`snapshot_json` output."""
+        data = json.loads(snapshot_json)
+        if data["travel_times"]:
+            self.travel_times = {k: float(v) for k, v in data["travel_times"].items()}
+            self.fleet.space = self.base_space.with_travel_times(self.travel_times)
+        self.fleet.restore(data["fleet"])
+        self.version = int(data["version"])
+        self.cost_sum = float(data["cost_sum"])
+        self.recent.clear()
+        self.recent.extend(float(c) for c in data["recent"])
+        self.deleted = bool(data["deleted"])
+
+    def describe(self) -> dict[str, Any]:
+        """The fleet as the API shows it."""
+        cfg = self.fleet.config
+        return {
+            "id": self.id,
+            "network": self.entry.id,
+            "cost": self.cost_kind,
+            "objective": cfg.objective.name,
+            "step": cfg.schedule.to_dict(),
+            "counting": cfg.counting.value,
+            "annealing": None if cfg.annealing is None else cfg.annealing.to_dict(),
+            "seed": cfg.seed,
+            "version": self.version,
+            "targets": self.fleet.state.targets,
+            "vehicles": [
+                {
+                    "id": v.id,
+                    "type": v.type,
+                    "speed": v.speed,
+                    "position": self.entry.describe(p),
+                    "updates": n,
+                }
+                for v, p, n in zip(
+                    self.fleet.vehicles,
+                    self.fleet.state.positions,
+                    self.fleet.state.updates,
+                    strict=True,
+                )
+            ],
+            "reference_demand": None if self.reference is None else self.reference["demand"],
+        }
+
+    def metrics(self) -> dict[str, Any]:
+        """Running means, counts, step sizes and the gap to the optimum."""
+        n = self.fleet.state.targets
+        fleet = self.fleet
+        return {
+            "version": self.version,
+            "targets": n,
+            "mean_cost": self.cost_sum / n if n else None,
+            "recent_mean_cost": sum(self.recent) / len(self.recent) if self.recent else None,
+            "recent_window": self.recent.maxlen,
+            "step_size": {v.id: fleet.step_size(i) for i, v in enumerate(fleet.vehicles)},
+            "updates": {v.id: u for v, u in zip(fleet.vehicles, fleet.state.updates, strict=True)},
+            "optimum": self._optimum_gap(),
+        }
+
+    def reference_distribution(self) -> DemandDistribution[NetPosition]:
+        """The reference demand's atoms (built once from the stored spec)."""
+        from routing_svc.service.reference import build_demand
+
+        assert self.reference is not None
+        if self._reference_distribution is None:
+            self._reference_distribution = build_demand(self.entry, self.reference["demand"])
+        return self._reference_distribution
+
+    def _optimum_gap(self) -> dict[str, Any] | None:
+        if self.reference is None:
+            return None
+        from routing_svc.service.reference import expected_cost_now
+
+        optimum = float(self.reference["optimum"]["objective"])
+        value = expected_cost_now(self)
+        return {
+            "objective": optimum,
+            "expected_cost": value,
+            "gap": (value - optimum) / optimum if optimum > 0 else 0.0,
+            "method": self.reference["optimum"]["method"],
+            "proven_optimal": self.reference["optimum"]["proven_optimal"],
+        }
+
+
+def check_requires(requires: Sequence[str] | None) -> list[str] | None:
+    """Normalise a requirement list (``[]`` means any one vehicle)."""
+    if requires is None or len(requires) == 0:
+        return None
+    if any(not isinstance(r, str) or not r for r in requires):
+        raise InvalidInput("requires must be a list of non-empty type names")
+    return list(requires)

@@ -1,0 +1,215 @@
+"""The REST API through HTTP semantics (FastAPI's TestClient), on SQLite and PostgreSQL."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from routing_svc.network import RoadSpace, load_network
+from routing_svc.types import NetPosition
+from tests.service.conftest import DRT
+
+NET = load_network(DRT)
+SPACE = RoadSpace(NET, cost="length")
+
+
+def edge(i: int) -> str:
+    return NET.edge_ids[i]
+
+
+def fleet_body(fleet_id: str = "f1", **extra: Any) -> dict[str, Any]:
+    body: dict[str, Any] = {
+        "id": fleet_id,
+        "network": "drt",
+        "vehicles": [
+            {"id": "v1", "position": {"edge": edge(0), "offset": 1.0}},
+            {"id": "v2", "position": {"edge": edge(100), "offset": 0.0}},
+            {"id": "v3", "position": {"edge": edge(300), "offset": 2.5}},
+        ],
+    }
+    body.update(extra)
+    return body
+
+
+def test_full_life_of_a_fleet(client: TestClient) -> None:
+    nets = client.get("/v1/networks").json()["items"]
+    assert [n["id"] for n in nets] == ["drt"]
+    assert nets[0]["edges"] == NET.n_edges and nets[0]["has_projection"] is True
+    geo = client.get("/v1/networks/drt/geometry").json()
+    assert geo["type"] == "FeatureCollection" and len(geo["features"]) == NET.n_edges
+
+    r = client.post("/v1/fleets", json=fleet_body())
+    assert r.status_code == 201, r.text
+    fleet = r.json()
+    assert fleet["version"] == 1 and fleet["targets"] == 0
+    assert [v["id"] for v in fleet["vehicles"]] == ["v1", "v2", "v3"]
+    v1 = fleet["vehicles"][0]["position"]
+    assert v1["edge"] == edge(0) and v1["offset"] == 1.0
+    assert {"x", "y", "lon", "lat"} <= set(v1)
+
+    rng = np.random.default_rng(0)
+    for k in range(20):
+        e = int(rng.integers(NET.n_edges))
+        target = {"edge": edge(e), "offset": float(NET.length[e]) / 2}
+        before = client.post("/v1/fleets/f1/assign", json={"position": target}).json()
+        r = client.post("/v1/fleets/f1/targets", json={"position": target})
+        assert r.status_code == 200, r.text
+        out = r.json()
+        assert out["seq"] == k + 2 and out["version"] == k + 2
+        assert out["served_by"] == before["served_by"] and out["moved"] == before["moved"]
+        assert out["cost"] == pytest.approx(before["cost"])
+        # the service cost is the shortest-path cost from the mover's old position
+        # (independent check: scipy's Dijkstra over the same graph)
+        old = {v["id"]: v for v in fleet["vehicles"]}[out["moved"]]["position"]
+        old_pos = NetPosition(NET.edge_index[old["edge"]], old["offset"])
+        tgt_pos = NetPosition(e, float(NET.length[e]) / 2)
+        assert out["cost"] == pytest.approx(SPACE.cost_matrix([old_pos], [tgt_pos])[0, 0])
+        fleet = client.get("/v1/fleets/f1").json()
+        moved = {v["id"]: v for v in fleet["vehicles"]}[out["moved"]]
+        assert moved["position"] == out["new_position"]
+
+    assert fleet["version"] == 21 and fleet["targets"] == 20
+    page = client.get("/v1/fleets/f1/events", params={"after": 0, "limit": 5}).json()
+    assert [e["seq"] for e in page["items"]] == [1, 2, 3, 4, 5]
+    assert page["items"][0]["kind"] == "fleet_created"
+    page2 = client.get("/v1/fleets/f1/events", params={"after": page["next_after"]}).json()
+    assert page2["items"][0]["seq"] == 6 and page2["items"][-1]["seq"] == 21
+
+    m = client.get("/v1/fleets/f1/metrics").json()
+    assert m["targets"] == 20 and sum(m["updates"].values()) == 20
+    assert m["mean_cost"] > 0 and m["optimum"] is None
+    assert set(m["step_size"]) == {"v1", "v2", "v3"}
+
+    assert client.get("/v1/fleets").json()["items"][0]["id"] == "f1"
+    assert client.delete("/v1/fleets/f1").status_code == 204
+    r = client.get("/v1/fleets/f1")
+    assert r.status_code == 404
+    assert r.headers["content-type"].startswith("application/problem+json")
+    assert client.post("/v1/fleets", json=fleet_body()).status_code == 409  # ids are not reused
+
+
+def test_positions_given_as_xy_and_lonlat_are_snapped(client: TestClient) -> None:
+    x, y = SPACE.xy(NetPosition(42, 3.0))
+    lon, lat = SPACE.lonlat(NetPosition(42, 3.0))
+    body = fleet_body(
+        vehicles=[
+            {"id": "a", "position": {"x": x, "y": y}},
+            {"id": "b", "position": {"lon": lon, "lat": lat}},
+        ]
+    )
+    fleet = client.post("/v1/fleets", json=body).json()
+    for v in fleet["vehicles"]:
+        assert v["position"]["edge"] == edge(42) or np.hypot(
+            v["position"]["x"] - x, v["position"]["y"] - y
+        ) < 0.5
+        assert v["position"]["offset"] == pytest.approx(3.0, abs=0.5)
+
+
+def test_heterogeneous_a_b_ab_fleet(client: TestClient) -> None:
+    positions = [0, 60, 120, 180, 240, 300]
+    vehicles = [
+        {"id": f"{t.lower()}{i}", "type": t, "speed": 1.0 + (i % 2),
+         "position": {"edge": edge(positions[i + 3 * (t == "B")]), "offset": 0.0}}
+        for t in ("A", "B") for i in range(3)
+    ]  # fmt: skip
+    client.post("/v1/fleets", json=fleet_body(vehicles=vehicles)).raise_for_status()
+    rng = np.random.default_rng(3)
+    for k in range(30):
+        e = int(rng.integers(NET.n_edges))
+        target = {"edge": edge(e), "offset": 0.0}
+        requires = [["A"], ["B"], ["A", "B"]][k % 3]
+        fleet = client.get("/v1/fleets/f1").json()
+        out = client.post("/v1/fleets/f1/targets", json={"position": target, "requires": requires})
+        assert out.status_code == 200, out.text
+        res = out.json()
+        # independent reference: the full cost matrix (scipy Dijkstra), divided by speeds
+        vs = fleet["vehicles"]
+        pos = [NetPosition(NET.edge_index[v["position"]["edge"]], v["position"]["offset"]) for v in vs]
+        times = SPACE.cost_matrix(pos, [NetPosition(e, 0.0)])[:, 0] / [v["speed"] for v in vs]
+        expected = []
+        for t in sorted(requires):
+            idx = [i for i, v in enumerate(vs) if v["type"] == t]
+            best = min(idx, key=lambda i: (times[i], vs[i]["id"]))
+            expected.append(best)
+        assert res["served_by"] == [vs[i]["id"] for i in expected]
+        last = max(expected, key=lambda i: (times[i], [-ord(c) for c in vs[i]["id"]]))
+        assert res["moved"] == vs[last]["id"]
+        assert res["cost"] == pytest.approx(times[last])
+        if requires == ["A", "B"]:
+            types = {v["id"]: v["type"] for v in vs}
+            assert sorted(types[i] for i in res["served_by"]) == ["A", "B"]
+
+
+def test_idempotent_retries(client: TestClient) -> None:
+    client.post("/v1/fleets", json=fleet_body()).raise_for_status()
+    body = {"position": {"edge": edge(7), "offset": 0.0}}
+    first = client.post("/v1/fleets/f1/targets", json=body, headers={"Idempotency-Key": "k1"})
+    again = client.post("/v1/fleets/f1/targets", json=body, headers={"Idempotency-Key": "k1"})
+    assert first.status_code == again.status_code == 200
+    assert first.content == again.content
+    assert client.get("/v1/fleets/f1").json()["version"] == 2
+    other = {"position": {"edge": edge(8), "offset": 0.0}}
+    clash = client.post("/v1/fleets/f1/targets", json=other, headers={"Idempotency-Key": "k1"})
+    assert clash.status_code == 409
+    assert client.get("/v1/fleets/f1").json()["version"] == 2
+
+    batch = {"targets": [body, other, body]}
+    b1 = client.post("/v1/fleets/f1/targets:batch", json=batch, headers={"Idempotency-Key": "b"})
+    b2 = client.post("/v1/fleets/f1/targets:batch", json=batch, headers={"Idempotency-Key": "b"})
+    assert b1.status_code == 200 and b1.content == b2.content
+    assert [r["seq"] for r in b1.json()["results"]] == [3, 4, 5]
+    assert client.get("/v1/fleets/f1").json()["version"] == 5
+
+
+def test_batch_equals_single_posts(client: TestClient) -> None:
+    client.post("/v1/fleets", json=fleet_body("one")).raise_for_status()
+    client.post("/v1/fleets", json=fleet_body("many")).raise_for_status()
+    rng = np.random.default_rng(9)
+    targets = [{"position": {"edge": edge(int(e)), "offset": 0.0}} for e in rng.integers(NET.n_edges, size=25)]
+    singles = [client.post("/v1/fleets/one/targets", json=t).json() for t in targets]
+    batch = client.post("/v1/fleets/many/targets:batch", json={"targets": targets}).json()
+    assert [s["new_position"] for s in singles] == [b["new_position"] for b in batch["results"]]
+    one = client.get("/v1/fleets/one").json()["vehicles"]
+    many = client.get("/v1/fleets/many").json()["vehicles"]
+    assert one == many
+
+
+def test_time_costs_and_travel_times(client: TestClient) -> None:
+    client.post("/v1/fleets", json=fleet_body(cost="time")).raise_for_status()
+    target = {"position": {"edge": edge(5), "offset": 0.0}}
+    before = client.post("/v1/fleets/f1/assign", json=target).json()
+    slow = {edge(i): 1e5 for i in range(NET.n_edges) if i != 5}
+    r = client.put("/v1/fleets/f1/traveltimes", json={"times": slow})
+    assert r.status_code == 200, r.text
+    assert r.json()["version"] == 2
+    after = client.post("/v1/fleets/f1/assign", json=target).json()
+    assert after["cost"] > before["cost"] + 1e4
+    length_fleet = fleet_body("len")
+    client.post("/v1/fleets", json=length_fleet).raise_for_status()
+    assert client.put("/v1/fleets/len/traveltimes", json={"times": {edge(1): 3.0}}).status_code == 409
+
+
+def test_reference_demand_gives_a_gap(client: TestClient) -> None:
+    body = fleet_body(reference_demand={"kind": "hotspots", "count": 2, "seed": 4})
+    client.post("/v1/fleets", json=body).raise_for_status()
+    m = client.get("/v1/fleets/f1/metrics").json()
+    opt = m["optimum"]
+    assert opt is not None and opt["objective"] > 0
+    assert opt["expected_cost"] >= opt["objective"] * (1 - 1e-9)
+    assert opt["gap"] == pytest.approx((opt["expected_cost"] - opt["objective"]) / opt["objective"])
+
+
+def test_start_at_the_optimum_of_a_prior_sample(client: TestClient) -> None:
+    sample = [{"edge": edge(10), "offset": 0.0}] * 5 + [{"edge": edge(400), "offset": 0.0}] * 5
+    body = fleet_body(
+        vehicles=[{"id": "a"}, {"id": "b"}],
+        start={"optimum": {"sample": sample}},
+    )
+    r = client.post("/v1/fleets", json=body)
+    assert r.status_code == 201, r.text
+    edges = sorted(v["position"]["edge"] for v in r.json()["vehicles"])
+    # two vehicles for two demand points: each sits on one (cost 0)
+    assert edges == sorted([edge(10), edge(400)])
