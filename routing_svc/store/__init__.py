@@ -1,0 +1,53 @@
+"""Event-log store: fleets as streams of JSON events, on SQLite or PostgreSQL.
+
+::
+
+    from routing_svc.store import NewEvent, open_event_log
+
+    with open_event_log("sqlite:///var/routing.db") as log:
+        log.create_network("grid", sha256=digest, path=str(path), name="grid")
+        log.create_fleet("taxis", "grid", config_json, created_payload_json)
+        result = log.append(
+            "taxis",
+            expected_version=cached_version,
+            build=lambda missed: [NewEvent("target", payload_json, outcome_json)],
+            idempotency_key=key,
+            request_hash=digest_of_request,
+        )
+
+Modules: :mod:`~routing_svc.store.event_log` (the :class:`EventLog` API),
+:mod:`~routing_svc.store.records` (records in and out),
+:mod:`~routing_svc.store.schema` (tables), :mod:`~routing_svc.store.queries`
+(statements), :mod:`~routing_svc.store.engine` (durability settings, checks,
+migrations), ``migrations/`` (Alembic scripts, run at :meth:`EventLog.open`).
+"""
+
+from routing_svc.store.event_log import (
+    FLEET_CREATED,
+    FLEET_DELETED,
+    Build,
+    EventLog,
+    Snapshot,
+    open_event_log,
+)
+from routing_svc.store.records import (
+    AppendResult,
+    EventRecord,
+    FleetRecord,
+    NetworkRecord,
+    NewEvent,
+)
+
+__all__ = [
+    "FLEET_CREATED",
+    "FLEET_DELETED",
+    "AppendResult",
+    "Build",
+    "EventLog",
+    "EventRecord",
+    "FleetRecord",
+    "NetworkRecord",
+    "NewEvent",
+    "Snapshot",
+    "open_event_log",
+]

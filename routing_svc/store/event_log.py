@@ -1,0 +1,398 @@
+"""The event log: each fleet as a numbered stream of JSON events.
+
+A fleet's state is the replay of its events; the ``fleets`` row keeps its
+version (the last event's ``seq``) and an optional snapshot so restarts are
+fast. :meth:`EventLog.append` is the one way to add events: in one transaction
+it locks the fleet row (``SELECT ... FOR UPDATE`` on PostgreSQL, the database
+write lock taken by ``BEGIN IMMEDIATE`` on SQLite), answers a retried
+idempotency key from the log, hands the events the caller has not seen yet to
+its ``build`` callback, and writes what ``build`` returns with contiguous
+numbers. Workers in several processes or on several hosts therefore apply
+events in one order, each replaying what it missed before computing the next.
+A call returns only after its transaction has committed.
+
+Deleting a fleet is a *soft* delete: the row is marked ``deleted`` and a
+``fleet_deleted`` event closes the stream. The log stays readable as an audit
+trail, and the id is never reused, so a worker holding a stale cache of the old
+fleet cannot mistake a new fleet for it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from types import TracebackType
+from typing import Self
+
+import sqlalchemy as sa
+from sqlalchemy.engine import Connection, Engine
+
+from routing_svc.errors import Conflict, InvalidInput, StorageError, UnknownFleet, UnknownNetwork
+from routing_svc.store import engine as store_engine
+from routing_svc.store import queries as q
+from routing_svc.store.records import (
+    AppendResult,
+    EventRecord,
+    FleetRecord,
+    NetworkRecord,
+    NewEvent,
+)
+from routing_svc.store.schema import events, fleets, networks
+
+__all__ = ["FLEET_CREATED", "FLEET_DELETED", "Build", "EventLog", "Snapshot", "open_event_log"]
+
+Build = Callable[[list[EventRecord]], Sequence[NewEvent]]
+"""``build(missed_events) -> new events``, called under the fleet's lock."""
+Snapshot = Callable[[int], str | None]
+"""``snapshot(new_version) -> state JSON or None``, called after ``build``."""
+
+FLEET_CREATED = "fleet_created"
+"""Kind of event number 1 of every fleet."""
+FLEET_DELETED = "fleet_deleted"
+"""Kind of the last event of a deleted fleet."""
+
+
+class EventLog:
+    """Event-log store over SQLite (default) or PostgreSQL.
+
+    Parameters
+    ----------
+    url
+        ``sqlite:///path/to/file.db`` or ``postgresql+psycopg://user@host/db``.
+    busy_timeout_ms
+        How long a SQLite writer waits for the write lock before failing.
+
+    Notes
+    -----
+    The constructor only stores its arguments; :meth:`open` connects, checks
+    the durability settings (see :mod:`routing_svc.store.engine`) and runs the
+    migrations. Use it as a context manager or call :meth:`close`. One
+    instance may be shared by threads.
+    """
+
+    def __init__(self, url: str, *, busy_timeout_ms: int = 30_000) -> None:
+        self.url = url
+        self.busy_timeout_ms = busy_timeout_ms
+        self._engine: Engine | None = None
+
+    # -- lifecycle -------------------------------------------------------------
+
+    def open(self) -> Self:
+        """Connect, refuse unsafe durability settings, migrate; return ``self``."""
+        if self._engine is not None:
+            return self
+        engine = store_engine.create_store_engine(self.url, busy_timeout_ms=self.busy_timeout_ms)
+        try:
+            with store_engine.storage_errors("open the event log"):
+                with engine.connect() as connection:
+                    store_engine.check_durability(connection)
+                store_engine.upgrade(engine)
+        except BaseException:
+            engine.dispose()
+            raise
+        self._engine = engine
+        return self
+
+    def close(self) -> None:
+        """Release every connection. Closing twice is harmless."""
+        if self._engine is not None:
+            self._engine.dispose()
+            self._engine = None
+
+    def __enter__(self) -> Self:
+        return self.open()
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    @property
+    def dialect(self) -> str:
+        """``"sqlite"`` or ``"postgresql"``."""
+        return self._require().dialect.name
+
+    # -- networks --------------------------------------------------------------
+
+    def create_network(
+        self, network_id: str, *, sha256: str, path: str, name: str, meta_json: str = "{}"
+    ) -> NetworkRecord:
+        """Register a network file; :class:`Conflict` if the id exists."""
+        q.check_id(network_id, "network id")
+        row: dict[str, object] = {"id": network_id, "sha256": sha256, "path": path}
+        row |= {"name": name, "created_at": q.now(), "meta": meta_json}
+        with self._write(f"create network {network_id!r}") as conn:
+            if q.select_network(conn, network_id) is not None:
+                raise Conflict(f"network {network_id!r} already exists")
+            conn.execute(sa.insert(networks), row)
+        return self.get_network(network_id)
+
+    def get_network(self, network_id: str) -> NetworkRecord:
+        """Return a network; :class:`UnknownNetwork` if there is none."""
+        with self._read("read a network") as conn:
+            row = q.select_network(conn, network_id)
+        if row is None:
+            raise UnknownNetwork(f"no network {network_id!r}")
+        return NetworkRecord.from_row(row)
+
+    def list_networks(self) -> list[NetworkRecord]:
+        """Return every network, ordered by id."""
+        with self._read("list networks") as conn:
+            rows = conn.execute(sa.select(networks).order_by(networks.c.id)).all()
+        return [NetworkRecord.from_row(row) for row in rows]
+
+    # -- fleets ----------------------------------------------------------------
+
+    def create_fleet(
+        self, fleet_id: str, network_id: str, config_json: str, created_event_payload: str
+    ) -> FleetRecord:
+        """Create a fleet and its ``fleet_created`` event (``seq`` 1) atomically.
+
+        Raises
+        ------
+        Conflict
+            If a fleet with this id exists or ever existed (ids are not reused).
+        UnknownNetwork
+            If ``network_id`` is not registered.
+        """
+        q.check_id(fleet_id, "fleet id")
+        created = q.check_new_events([NewEvent(FLEET_CREATED, created_event_payload)])
+        now = q.now()
+        fleet: dict[str, object] = {
+            "id": fleet_id,
+            "network_id": network_id,
+            "config": config_json,
+            "version": 1,
+        }
+        fleet |= {"state": None, "snapshot_version": None, "created_at": now, "deleted": False}
+        rows = q.event_rows(
+            fleet_id, 0, created, idempotency_key=None, request_hash=None, created_at=now
+        )
+        with self._write(f"create fleet {fleet_id!r}") as conn:
+            if q.select_fleet(conn, fleet_id) is not None:
+                raise Conflict(f"fleet {fleet_id!r} already exists (fleet ids are never reused)")
+            if q.select_network(conn, network_id) is None:
+                raise UnknownNetwork(f"no network {network_id!r}")
+            conn.execute(sa.insert(fleets), fleet)
+            conn.execute(sa.insert(events), rows)
+        return self.get_fleet(fleet_id)
+
+    def get_fleet(self, fleet_id: str, *, include_deleted: bool = False) -> FleetRecord:
+        """Return a fleet; :class:`UnknownFleet` if there is none (or it was deleted)."""
+        with self._read("read a fleet") as conn:
+            row = q.select_fleet(conn, fleet_id)
+        if row is None or (row.deleted and not include_deleted):
+            raise UnknownFleet(f"no fleet {fleet_id!r}")
+        return FleetRecord.from_row(row)
+
+    def list_fleets(
+        self, *, network_id: str | None = None, include_deleted: bool = False
+    ) -> list[FleetRecord]:
+        """Return the fleets (optionally of one network), ordered by id."""
+        query = sa.select(fleets).order_by(fleets.c.id)
+        if network_id is not None:
+            query = query.where(fleets.c.network_id == network_id)
+        if not include_deleted:
+            query = query.where(fleets.c.deleted == sa.false())
+        with self._read("list fleets") as conn:
+            rows = conn.execute(query).all()
+        return [FleetRecord.from_row(row) for row in rows]
+
+    def delete_fleet(self, fleet_id: str, *, payload_json: str = "{}") -> EventRecord:
+        """Soft-delete a fleet: mark it deleted and append a ``fleet_deleted`` event.
+
+        Returns
+        -------
+        EventRecord
+            The ``fleet_deleted`` event, the last of the fleet's stream.
+        """
+        gone = q.check_new_events([NewEvent(FLEET_DELETED, payload_json)])
+        with self._write(f"delete fleet {fleet_id!r}") as conn:
+            version = q.lock_fleet(conn, fleet_id).version
+            rows = q.event_rows(
+                fleet_id, version, gone, idempotency_key=None, request_hash=None, created_at=q.now()
+            )
+            conn.execute(sa.insert(events), rows)
+            conn.execute(
+                sa.update(fleets)
+                .where(fleets.c.id == fleet_id)
+                .values(version=version + 1, deleted=True)
+            )
+        return q.records_of_rows(rows)[0]
+
+    # -- events ----------------------------------------------------------------
+
+    def append(
+        self,
+        fleet_id: str,
+        *,
+        expected_version: int,
+        build: Build,
+        idempotency_key: str | None = None,
+        request_hash: str | None = None,
+        snapshot: Snapshot | None = None,
+    ) -> AppendResult:
+        """Append the events that ``build`` returns, in one transaction.
+
+        Parameters
+        ----------
+        fleet_id
+            The fleet.
+        expected_version
+            The version of the caller's cached state. The stored events after
+            it are passed to ``build`` so the caller can replay them first.
+        build
+            ``build(missed) -> [NewEvent, ...]``, called under the fleet's lock.
+            It may return several events (numbered contiguously) or none (then
+            nothing is written and the idempotency key is not recorded). If it
+            raises, nothing is written and the exception propagates.
+        idempotency_key, request_hash
+            A retry with a known key returns the stored events without calling
+            ``build``; :class:`Conflict` if its ``request_hash`` differs.
+        snapshot
+            ``snapshot(new_version) -> state JSON or None``, called after
+            ``build`` when events were built; a string is saved, in the same
+            transaction, as the fleet's snapshot at ``new_version``.
+
+        Returns
+        -------
+        AppendResult
+            Returned only after the transaction has committed.
+
+        Raises
+        ------
+        UnknownFleet
+            No such fleet, or it was deleted.
+        Conflict
+            ``expected_version`` is ahead of the log, or the idempotency key was
+            used for a different request.
+        InvalidInput
+            A bad argument, or ``build`` returned something other than events.
+        """
+        q.check_version(expected_version)
+        q.check_key(idempotency_key, "idempotency key")
+        q.check_key(request_hash, "request hash")
+        with self._write(f"append to fleet {fleet_id!r}") as conn:
+            version = int(q.lock_fleet(conn, fleet_id).version)
+            if expected_version > version:
+                raise Conflict(
+                    f"fleet {fleet_id!r} is at version {version}; "
+                    f"the caller's cache claims version {expected_version}"
+                )
+            if idempotency_key is not None:
+                prior = q.keyed_batch(conn, fleet_id, idempotency_key)
+                if prior:
+                    if prior[0].request_hash != request_hash:
+                        raise Conflict(
+                            f"idempotency key {idempotency_key!r} was used for another request"
+                        )
+                    missed = q.select_events(conn, fleet_id, after=expected_version)
+                    return AppendResult(fleet_id, version, tuple(prior), tuple(missed), True)
+            missed = q.select_events(conn, fleet_id, after=expected_version)
+            new = q.check_new_events(build(list(missed)))
+            rows = q.event_rows(
+                fleet_id,
+                version,
+                new,
+                idempotency_key=idempotency_key,
+                request_hash=request_hash,
+                created_at=q.now(),
+            )
+            if rows:
+                q.insert_events(conn, fleet_id, rows, snapshot=snapshot)
+        return AppendResult(
+            fleet_id, version + len(rows), q.records_of_rows(rows), tuple(missed), False
+        )
+
+    def events(self, fleet_id: str, *, after: int = 0, limit: int = 1000) -> list[EventRecord]:
+        """Return up to ``limit`` events with ``seq > after``, in order (one page).
+
+        Events of a deleted fleet stay readable.
+        """
+        q.check_version(after)
+        if isinstance(limit, bool) or not isinstance(limit, int) or limit < 1:
+            raise InvalidInput("limit must be an integer >= 1")
+        with self._read("read events") as conn:
+            if q.select_fleet(conn, fleet_id) is None:
+                raise UnknownFleet(f"no fleet {fleet_id!r}")
+            return q.select_events(conn, fleet_id, after=after, limit=limit)
+
+    def events_since(self, fleet_id: str, version: int) -> list[EventRecord]:
+        """Return every event with ``seq > version``, in order."""
+        q.check_version(version)
+        with self._read("read events") as conn:
+            if q.select_fleet(conn, fleet_id) is None:
+                raise UnknownFleet(f"no fleet {fleet_id!r}")
+            return q.select_events(conn, fleet_id, after=version)
+
+    def save_snapshot(self, fleet_id: str, version: int, state_json: str) -> bool:
+        """Keep ``state_json`` as the fleet's state at ``version``.
+
+        Returns
+        -------
+        bool
+            ``False`` (and nothing changes) when a snapshot at ``version`` or
+            later is already stored.
+
+        Raises
+        ------
+        Conflict
+            ``version`` is ahead of the fleet's version.
+        """
+        q.check_version(version)
+        with self._write(f"snapshot fleet {fleet_id!r}") as conn:
+            row = q.lock_fleet(conn, fleet_id)
+            if version > row.version:
+                raise Conflict(f"fleet {fleet_id!r} is at version {row.version}, not {version}")
+            if row.snapshot_version is not None and row.snapshot_version >= version:
+                return False
+            conn.execute(
+                sa.update(fleets)
+                .where(fleets.c.id == fleet_id)
+                .values(state=state_json, snapshot_version=version)
+            )
+        return True
+
+    def integrity_check(self) -> list[str]:
+        """Return the problems found (an empty list when all is well).
+
+        On SQLite this runs ``PRAGMA integrity_check``; on both backends it
+        checks that every fleet's events are numbered ``1..version`` without gaps.
+        """
+        problems: list[str] = []
+        with self._read("check integrity") as conn:
+            if conn.dialect.name == "sqlite":
+                rows = conn.exec_driver_sql("PRAGMA integrity_check").scalars().all()
+                problems += [str(row) for row in rows if str(row) != "ok"]
+            problems += q.fleet_event_stats(conn)
+        return problems
+
+    # -- plumbing --------------------------------------------------------------
+
+    def _require(self) -> Engine:
+        if self._engine is None:
+            raise StorageError("the event log is not open (call open() or use it in a with block)")
+        return self._engine
+
+    @contextmanager
+    def _write(self, what: str) -> Iterator[Connection]:
+        """A transaction that holds the write lock (SQLite) until it ends."""
+        engine = self._require()
+        with store_engine.storage_errors(what), engine.begin() as conn:
+            yield conn
+
+    @contextmanager
+    def _read(self, what: str) -> Iterator[Connection]:
+        """A read-only transaction (a deferred ``BEGIN`` on SQLite)."""
+        engine = self._require()
+        with store_engine.storage_errors(what), engine.connect() as conn:
+            conn.execution_options(**{store_engine.BEGIN_MODE: "DEFERRED"})
+            yield conn
+
+
+def open_event_log(url: str, *, busy_timeout_ms: int = 30_000) -> EventLog:
+    """Create an :class:`EventLog` for ``url`` and open it."""
+    return EventLog(url, busy_timeout_ms=busy_timeout_ms).open()

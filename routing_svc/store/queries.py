@@ -1,0 +1,219 @@
+"""The SQL statements and argument checks behind :class:`~routing_svc.store.EventLog`.
+
+Every function takes an open :class:`~sqlalchemy.engine.Connection` inside the
+caller's transaction and never commits.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from datetime import UTC, datetime
+from types import SimpleNamespace
+from typing import Any
+
+import sqlalchemy as sa
+from sqlalchemy.engine import Connection
+
+from routing_svc.errors import InvalidInput, UnknownFleet
+from routing_svc.store.records import EventRecord, NewEvent
+from routing_svc.store.schema import ID_LENGTH, KEY_LENGTH, KIND_LENGTH, events, fleets, networks
+
+__all__ = [
+    "check_id",
+    "check_key",
+    "check_new_events",
+    "check_version",
+    "event_rows",
+    "fleet_event_stats",
+    "insert_events",
+    "keyed_batch",
+    "lock_fleet",
+    "now",
+    "records_of_rows",
+    "select_events",
+    "select_fleet",
+    "select_network",
+]
+
+
+def now() -> datetime:
+    """The current time, aware, in UTC."""
+    return datetime.now(UTC)
+
+
+def check_id(value: str, what: str) -> None:
+    """Raise :class:`InvalidInput` unless ``value`` is an id of 1 to 128 characters."""
+    if not isinstance(value, str) or not 0 < len(value) <= ID_LENGTH:
+        raise InvalidInput(f"{what} must be a string of 1 to {ID_LENGTH} characters")
+
+
+def check_key(value: str | None, what: str) -> None:
+    """Raise :class:`InvalidInput` unless ``value`` is ``None`` or 1 to 255 characters."""
+    if value is not None and (not isinstance(value, str) or not 0 < len(value) <= KEY_LENGTH):
+        raise InvalidInput(f"{what} must be a string of 1 to {KEY_LENGTH} characters")
+
+
+def check_version(value: int) -> None:
+    """Raise :class:`InvalidInput` unless ``value`` is an integer >= 0."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise InvalidInput(f"a version must be an integer >= 0, not {value!r}")
+
+
+def check_new_events(new: Sequence[NewEvent]) -> list[NewEvent]:
+    """Return ``new`` as a list after checking that it holds valid :class:`NewEvent` s."""
+    checked = list(new)
+    for item in checked:
+        if not isinstance(item, NewEvent):
+            raise InvalidInput(f"build must return NewEvent objects, not {type(item).__name__}")
+        if not isinstance(item.kind, str) or not 0 < len(item.kind) <= KIND_LENGTH:
+            raise InvalidInput(f"event kind must have 1 to {KIND_LENGTH} characters")
+        if not isinstance(item.payload_json, str) or not isinstance(item.result_json, str | None):
+            raise InvalidInput("event payload and result must be JSON text (str)")
+    return checked
+
+
+def event_rows(
+    fleet_id: str,
+    version: int,
+    new: Sequence[NewEvent],
+    *,
+    idempotency_key: str | None,
+    request_hash: str | None,
+    created_at: datetime,
+) -> list[dict[str, Any]]:
+    """Rows of ``events`` for ``new``, numbered from ``version + 1``.
+
+    The idempotency key and request hash go on the first row of the batch; every
+    row records the batch size, so a retry can find the whole batch again.
+    """
+    return [
+        {
+            "fleet_id": fleet_id,
+            "seq": version + 1 + index,
+            "kind": item.kind,
+            "payload": item.payload_json,
+            "result": item.result_json,
+            "idempotency_key": idempotency_key if index == 0 else None,
+            "request_hash": request_hash if index == 0 else None,
+            "batch_size": len(new),
+            "created_at": created_at,
+        }
+        for index, item in enumerate(new)
+    ]
+
+
+def records_of_rows(rows: Sequence[dict[str, Any]]) -> tuple[EventRecord, ...]:
+    """The :class:`EventRecord` s of rows built by :func:`event_rows`."""
+    return tuple(EventRecord.from_row(SimpleNamespace(**row)) for row in rows)
+
+
+def insert_events(
+    conn: Connection,
+    fleet_id: str,
+    rows: list[dict[str, Any]],
+    *,
+    snapshot: Callable[[int], str | None] | None,
+) -> None:
+    """Insert event rows and move the fleet's version (and snapshot) along.
+
+    ``snapshot(new_version)`` is called after the insert; a string it returns
+    is stored as the fleet's state at ``new_version``.
+    """
+    conn.execute(sa.insert(events), rows)
+    new_version = int(rows[-1]["seq"])
+    values: dict[str, Any] = {"version": new_version}
+    state = snapshot(new_version) if snapshot is not None else None
+    if state is not None:
+        if not isinstance(state, str):
+            raise InvalidInput("snapshot must return JSON text (str) or None")
+        values |= {"state": state, "snapshot_version": new_version}
+    conn.execute(sa.update(fleets).where(fleets.c.id == fleet_id).values(values))
+
+
+def select_network(conn: Connection, network_id: str) -> Any:
+    """The ``networks`` row of ``network_id``, or ``None``."""
+    return conn.execute(sa.select(networks).where(networks.c.id == network_id)).one_or_none()
+
+
+def select_fleet(conn: Connection, fleet_id: str) -> Any:
+    """The ``fleets`` row of ``fleet_id`` (deleted or not), or ``None``."""
+    return conn.execute(sa.select(fleets).where(fleets.c.id == fleet_id)).one_or_none()
+
+
+def lock_fleet(conn: Connection, fleet_id: str) -> Any:
+    """Lock a live fleet's row for this transaction and return it.
+
+    ``SELECT ... FOR UPDATE`` on PostgreSQL; on SQLite the clause is not
+    rendered and the write lock of ``BEGIN IMMEDIATE`` does the same job.
+
+    Raises
+    ------
+    UnknownFleet
+        No such fleet, or it was deleted.
+    """
+    row = conn.execute(
+        sa.select(fleets).where(fleets.c.id == fleet_id).with_for_update()
+    ).one_or_none()
+    if row is None or row.deleted:
+        raise UnknownFleet(f"no fleet {fleet_id!r}")
+    return row
+
+
+def select_events(
+    conn: Connection, fleet_id: str, *, after: int, limit: int | None = None
+) -> list[EventRecord]:
+    """The events of ``fleet_id`` with ``seq > after`` in order, at most ``limit``."""
+    query = (
+        sa.select(events)
+        .where(events.c.fleet_id == fleet_id, events.c.seq > after)
+        .order_by(events.c.seq)
+    )
+    if limit is not None:
+        query = query.limit(limit)
+    return [EventRecord.from_row(row) for row in conn.execute(query)]
+
+
+def keyed_batch(conn: Connection, fleet_id: str, key: str) -> list[EventRecord]:
+    """The events written by the append that used idempotency ``key`` (or ``[]``)."""
+    first = conn.execute(
+        sa.select(events.c.seq, events.c.batch_size).where(
+            events.c.fleet_id == fleet_id, events.c.idempotency_key == key
+        )
+    ).one_or_none()
+    if first is None:
+        return []
+    query = (
+        sa.select(events)
+        .where(
+            events.c.fleet_id == fleet_id,
+            events.c.seq >= first.seq,
+            events.c.seq < first.seq + first.batch_size,
+        )
+        .order_by(events.c.seq)
+    )
+    return [EventRecord.from_row(row) for row in conn.execute(query)]
+
+
+def fleet_event_stats(conn: Connection) -> list[str]:
+    """Problems with event numbering: each fleet must hold events ``1..version``."""
+    query = (
+        sa.select(
+            fleets.c.id,
+            fleets.c.version,
+            sa.func.count(events.c.seq),
+            sa.func.min(events.c.seq),
+            sa.func.max(events.c.seq),
+        )
+        .select_from(fleets.outerjoin(events, events.c.fleet_id == fleets.c.id))
+        .group_by(fleets.c.id, fleets.c.version)
+        .order_by(fleets.c.id)
+    )
+    problems = []
+    for fleet_id, version, count, low, high in conn.execute(query):
+        # With a primary key on (fleet_id, seq), count == max == version and
+        # min == 1 means exactly 1..version.
+        if count != version or (count > 0 and (low != 1 or high != version)):
+            problems.append(
+                f"fleet {fleet_id!r}: version {version} but {count} events numbered {low}..{high}"
+            )
+    return problems
