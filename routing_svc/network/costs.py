@@ -1,0 +1,229 @@
+"""Edge costs of a road space and batch shortest-path costs between positions.
+
+An edge's cost is its length (m) or its travel time (s); a part of an edge
+costs in proportion to its length (``rate = cost / length`` per metre). The
+cost between two positions is defined in :mod:`routing_svc.network.search`;
+:func:`cost_matrix` computes it for many pairs with scipy's C Dijkstra.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from routing_svc.errors import InvalidInput, UnknownEdge, Unreachable
+from routing_svc.network.compile import CompiledNetwork
+from routing_svc.types import NetPosition
+
+__all__ = [
+    "CostKind",
+    "EdgeCosts",
+    "check_position",
+    "cost_matrix",
+    "position_arrays",
+    "position_columns",
+]
+
+CostKind = Literal["length", "time"]
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+_MATRIX_CELLS = 4_000_000
+
+
+@dataclass(frozen=True, eq=False)
+class EdgeCosts:
+    """Cost of traversing each edge, and cost per metre along it.
+
+    Attributes
+    ----------
+    kind : {"length", "time"}
+        Metres or seconds.
+    cost : FloatArray
+        Cost of the whole edge (> 0, finite).
+    rate : FloatArray
+        ``cost / length``: cost of one metre of the edge.
+    """
+
+    kind: CostKind
+    cost: FloatArray
+    rate: FloatArray
+
+    @classmethod
+    def free_flow(cls, network: CompiledNetwork, kind: CostKind) -> EdgeCosts:
+        """Lengths, or free-flow travel times ``length / speed``."""
+        if kind == "length":
+            cost = network.length.copy()
+        elif kind == "time":
+            cost = network.length / network.speed
+        else:
+            raise InvalidInput(f"cost must be 'length' or 'time', got {kind!r}")
+        return cls._of(kind, cost, network.length)
+
+    @classmethod
+    def _of(cls, kind: CostKind, cost: FloatArray, length: FloatArray) -> EdgeCosts:
+        rate = cost / length
+        cost.flags.writeable = False
+        rate.flags.writeable = False
+        return cls(kind=kind, cost=cost, rate=rate)
+
+    def with_travel_times(self, network: CompiledNetwork, times: Mapping[str, float]) -> EdgeCosts:
+        """A copy with the travel times (s) of some edges replaced.
+
+        Raises
+        ------
+        InvalidInput
+            If the costs are lengths, or a time is not a finite number > 0.
+        UnknownEdge
+            If an edge id is not in the network.
+        """
+        if self.kind != "time":
+            raise InvalidInput("travel times can only be replaced in a space with cost='time'")
+        cost = self.cost.copy()
+        for edge_id, value in times.items():
+            index = network.edge_index.get(edge_id)
+            if index is None:
+                raise UnknownEdge(f"unknown edge {edge_id!r}")
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise InvalidInput(f"travel time of edge {edge_id!r} is not a number")
+            if not (math.isfinite(value) and value > 0):
+                raise InvalidInput(f"travel time of edge {edge_id!r} must be finite and > 0")
+            cost[index] = float(value)
+        return self._of("time", cost, network.length)
+
+
+def check_position(network: CompiledNetwork, position: NetPosition, *, what: str) -> None:
+    """Raise :class:`InvalidInput` unless ``position`` lies on the network."""
+    edge, offset = position
+    if isinstance(edge, bool) or not isinstance(edge, int | np.integer):
+        raise InvalidInput(f"{what}: edge index must be an integer")
+    if not 0 <= edge < network.n_edges:
+        raise InvalidInput(f"{what}: edge index {edge} out of range")
+    if isinstance(offset, bool) or not isinstance(offset, int | float | np.integer | np.floating):
+        raise InvalidInput(f"{what}: offset must be a number")
+    if not (math.isfinite(offset) and 0.0 <= offset <= network.length[edge]):
+        raise InvalidInput(
+            f"{what}: offset {offset!r} not in [0, {network.length[edge]}] on edge "
+            f"{network.edge_ids[edge]!r}"
+        )
+
+
+def position_columns(positions: Sequence[NetPosition], *, what: str) -> tuple[IntArray, FloatArray]:
+    """Edge indices and offsets of ``positions`` as arrays, not yet checked against a network.
+
+    Raises
+    ------
+    InvalidInput
+        If a position is not a pair of an integer edge index and a number.
+    """
+    if len(positions) == 0:
+        return np.empty(0, dtype=np.int64), np.empty(0)
+    try:
+        raw_edges, raw_offsets = zip(*positions, strict=True)
+        edges = np.array(raw_edges)
+        offsets = np.array(raw_offsets, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInput(f"every {what} position must be a pair (edge index, offset)") from None
+    if edges.dtype.kind not in "iu" or edges.ndim != 1 or offsets.ndim != 1:
+        raise InvalidInput(f"every {what} position needs an integer edge index")
+    return edges.astype(np.int64, copy=False), offsets
+
+
+def position_arrays(
+    network: CompiledNetwork, positions: Sequence[NetPosition], *, what: str
+) -> tuple[IntArray, FloatArray]:
+    """Edge indices and offsets of ``positions``, validated.
+
+    Raises
+    ------
+    InvalidInput
+        If a position is not on the network.
+    """
+    edges, offsets = position_columns(positions, what=what)
+    bad = (edges < 0) | (edges >= network.n_edges)
+    if not bad.any():
+        bad = ~((offsets >= 0.0) & (offsets <= network.length[edges]))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        check_position(network, positions[i], what=f"{what} {i}")
+    return edges, offsets
+
+
+def _edge_graph(network: CompiledNetwork, costs: EdgeCosts) -> csr_matrix:
+    """Arc ``x -> y`` weighs ``cost[y]``: distances run from the end of the source edge."""
+    return csr_matrix(
+        (costs.cost[network.fwd_indices], network.fwd_indices, network.fwd_indptr),
+        shape=(network.n_edges, network.n_edges),
+    )
+
+
+def cost_matrix(
+    network: CompiledNetwork,
+    costs: EdgeCosts,
+    sources: Sequence[NetPosition],
+    targets: Sequence[NetPosition],
+) -> FloatArray:
+    """Directed shortest-path costs from every source to every target position.
+
+    Runs scipy's Dijkstra from each distinct source edge, a chunk of sources at
+    a time, on the graph whose arc ``x -> y`` weighs ``cost[y]``; the cost from
+    the end of edge ``e`` to the start of edge ``t`` is the smallest distance
+    to a predecessor of ``t`` (0 for ``e`` itself).
+
+    Returns
+    -------
+    FloatArray
+        Shape ``(len(sources), len(targets))``.
+
+    Raises
+    ------
+    InvalidInput
+        If a position is not on the network.
+    Unreachable
+        If some target cannot be reached from some source.
+    """
+    src_edge, src_off = position_arrays(network, sources, what="source")
+    tgt_edge, tgt_off = position_arrays(network, targets, what="target")
+    out = np.empty((src_edge.shape[0], tgt_edge.shape[0]))
+    if out.size == 0:
+        return out
+    uniq_src, src_row = np.unique(src_edge, return_inverse=True)
+    uniq_tgt, tgt_col = np.unique(tgt_edge, return_inverse=True)
+    starts = network.rev_indptr[uniq_tgt]
+    stops = network.rev_indptr[uniq_tgt + 1]
+    gather = np.concatenate([network.rev_indices[a:b] for a, b in zip(starts, stops, strict=True)])
+    seg_start = np.concatenate(([0], np.cumsum(stops - starts)[:-1]))
+    no_preds = stops == starts
+    graph = _edge_graph(network, costs)
+    chunk = max(1, _MATRIX_CELLS // max(network.n_edges, gather.shape[0], 1))
+    to_start = np.empty((uniq_src.shape[0], uniq_tgt.shape[0]))
+    for lo in range(0, uniq_src.shape[0], chunk):
+        block = dijkstra(graph, directed=True, indices=uniq_src[lo : lo + chunk])
+        block = np.atleast_2d(block)
+        if gather.shape[0]:
+            reduced = np.minimum.reduceat(
+                block[:, gather], np.minimum(seg_start, gather.shape[0] - 1), axis=1
+            )
+        else:
+            reduced = np.full((block.shape[0], uniq_tgt.shape[0]), np.inf)
+        reduced[:, no_preds] = np.inf
+        to_start[lo : lo + chunk] = reduced
+    rate = costs.rate
+    leave = (network.length[src_edge] - src_off) * rate[src_edge]
+    enter = tgt_off * rate[tgt_edge]
+    out[:] = (leave[:, None] + to_start[src_row][:, tgt_col]) + enter[None, :]
+    same = (src_edge[:, None] == tgt_edge[None, :]) & (src_off[:, None] <= tgt_off[None, :])
+    if same.any():
+        rows, cols = np.nonzero(same)
+        out[rows, cols] = (tgt_off[cols] - src_off[rows]) * rate[tgt_edge[cols]]
+    if not np.isfinite(out).all():
+        i, j = (int(v[0]) for v in np.nonzero(~np.isfinite(out)))
+        raise Unreachable(f"target {j} cannot be reached from source {i}")
+    return out

@@ -1,0 +1,378 @@
+"""The road-network space: the ``Space[NetPosition]`` that the SA core runs on.
+
+Positions are ``(edge, offset)`` pairs on a :class:`CompiledNetwork`. The cost
+from a vehicle at ``(e, s)`` to a target at ``(t, s_t)`` is the forward
+distance ``s_t - s`` when ``e == t`` and ``s <= s_t``, else the rest of ``e``,
+the edges of the cheapest connection path, and ``s_t`` of ``t``; every part
+of an edge costs in proportion to its length (metres, or seconds at the
+edge's travel time). The lengths of internal junction lanes are ignored:
+a connection costs nothing. See :mod:`routing_svc.network.search`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from routing_svc.errors import InvalidInput, UnknownEdge, UnmetRequirement, Unreachable
+from routing_svc.network.compile import CompiledNetwork
+from routing_svc.network.costs import (
+    CostKind,
+    EdgeCosts,
+    check_position,
+    cost_matrix,
+    position_columns,
+)
+from routing_svc.network.search import (
+    STATUS_BAD_COUNTS,
+    STATUS_BAD_GROUP,
+    STATUS_BAD_POSITION,
+    STATUS_BAD_SPEED,
+    STATUS_UNMET,
+    STATUS_UNREACHABLE,
+    SearchBuffers,
+    nearest_vehicles,
+)
+from routing_svc.network.snapping import point_on_edge
+from routing_svc.network.twins import twin, twin_columns
+from routing_svc.network.walking import check_route, random_walk, walk_route
+from routing_svc.sa.space import Assignment, FloatArray, IntArray, Requirement
+from routing_svc.types import NetPosition
+
+__all__ = ["RoadSpace"]
+
+_TYPICAL_SEED = 0
+_TYPICAL_SOURCES = 32
+_TYPICAL_TARGETS = 256
+_ONE_VEHICLE = Requirement(
+    vehicle_groups=np.zeros(1, dtype=np.int64), counts=np.ones(1, dtype=np.int64)
+)
+_UNIT_SPEED = np.ones(1)
+
+
+class _SharedBuffers:
+    """Search buffers allocated on first use, shared by a space and the spaces derived from it."""
+
+    def __init__(self, network: CompiledNetwork) -> None:
+        self._network = network
+        self._buffers: SearchBuffers | None = None
+
+    def get(self) -> SearchBuffers:
+        if self._buffers is None:
+            self._buffers = SearchBuffers(self._network.n_edges, self._network.n_connections)
+        return self._buffers
+
+
+class RoadSpace:
+    """A SUMO road network as a space of ``NetPosition``.
+
+    Parameters
+    ----------
+    network : CompiledNetwork
+        The compiled network (shared, never modified).
+    cost : {"length", "time"}
+        Edge cost: length in metres, or free-flow travel time
+        ``length / speed`` in seconds.
+    either_way : bool
+        A vehicle waiting at its position on a two-way street may leave in
+        either direction (it turns around at the curb; see
+        :mod:`routing_svc.network.twins`). ``False`` gives the strictly
+        directed model: a vehicle leaves only forward along its edge.
+
+    Notes
+    -----
+    The search's work arrays are allocated on first use and shared by this
+    space and the spaces derived from it with :meth:`with_travel_times`; the
+    compiled search holds the GIL and leaves them clean, so calls from several
+    threads are safe and run one after another.
+    """
+
+    def __init__(
+        self, network: CompiledNetwork, *, cost: CostKind = "length", either_way: bool = True
+    ) -> None:
+        self.network = network
+        self._costs = EdgeCosts.free_flow(network, cost)
+        self._buffers = _SharedBuffers(network)
+        self._typical: float | None = None
+        self.either_way = either_way
+
+    @classmethod
+    def _derived(cls, parent: RoadSpace, costs: EdgeCosts) -> RoadSpace:
+        space = cls.__new__(cls)
+        space.network = parent.network
+        space._costs = costs
+        space._buffers = parent._buffers
+        space._typical = None
+        space.either_way = parent.either_way
+        return space
+
+    @property
+    def cost_kind(self) -> CostKind:
+        """``"length"`` (metres) or ``"time"`` (seconds)."""
+        return self._costs.kind
+
+    @property
+    def edge_costs(self) -> EdgeCosts:
+        """Cost and cost per metre of every edge (read-only arrays)."""
+        return self._costs
+
+    def with_travel_times(self, times: Mapping[str, float]) -> RoadSpace:
+        """A space on the same graph with the travel times (s) of some edges replaced.
+
+        Parameters
+        ----------
+        times : Mapping[str, float]
+            New travel time of each listed SUMO edge id; other edges keep theirs.
+
+        Raises
+        ------
+        InvalidInput
+            If this space's cost is not ``"time"``, or a time is not finite and > 0.
+        UnknownEdge
+            If an edge id is not in the network.
+        """
+        return RoadSpace._derived(self, self._costs.with_travel_times(self.network, times))
+
+    def search_buffer_bytes(self) -> int:
+        """Bytes of the search's work arrays (allocated on first use)."""
+        return self._buffers.get().nbytes()
+
+    def assign(
+        self,
+        target: NetPosition,
+        positions: list[NetPosition],
+        speeds: FloatArray,
+        requirement: Requirement,
+    ) -> Assignment[NetPosition]:
+        """Find the fastest vehicles of every requirement group with one search.
+
+        Runs one early-exit Dijkstra from ``target`` on the reverse edge graph
+        (:func:`routing_svc.network.search.nearest_vehicles`). Vehicle ``i``
+        arrives after ``cost_i / speeds[i]``; ties break by the lower index.
+        The route of the result is the mover's edge path (an array of edge
+        indices from its edge to the target's edge).
+
+        Raises
+        ------
+        InvalidInput
+            If the target, a position, a speed or the requirement is invalid.
+        UnmetRequirement
+            If a group has fewer vehicles than it needs.
+        Unreachable
+            If a group has too few vehicles that can reach the target.
+        """
+        net = self.network
+        check_position(net, target, what="target")
+        edges, offsets = position_columns(positions, what="vehicle")
+        speed = np.ascontiguousarray(speeds, dtype=np.float64)
+        groups, counts = _requirement_arrays(requirement, len(positions))
+        if speed.shape != (len(positions),):
+            raise InvalidInput("speeds must hold one value per vehicle")
+        n = len(positions)
+        if self.either_way and n and _on_network(net, edges, offsets):
+            twin_edges, twin_offsets = twin_columns(net, edges, offsets)
+            edges = np.concatenate([edges, twin_edges])
+            offsets = np.concatenate([offsets, twin_offsets])
+            speed = np.concatenate([speed, speed])
+            groups = np.concatenate([groups, groups])
+        buffers = self._buffers.get()
+        total = max(int(counts.sum()), 0)  # negative counts are rejected by the search
+        best_time, best_cost = np.empty(total), np.empty(total)
+        best_idx = np.empty(total, dtype=np.int32)
+        best_copy = np.empty(total, dtype=np.int32)
+        status, detail, mover_slot, route = nearest_vehicles(
+            net.rev_indptr, net.rev_indices, net.length, self._costs.cost, self._costs.rate,
+            target.edge, float(target.offset), edges, offsets, speed, groups, counts,
+            buffers.dist, buffers.pred, buffers.touched, buffers.heap_key, buffers.heap_node,
+            buffers.head, buffers.vehicle_links(edges.shape[0]), best_time, best_cost, best_idx,
+            best_copy, max(n, 1),
+        )  # fmt: skip
+        if status == STATUS_BAD_POSITION:
+            check_position(net, positions[detail], what=f"vehicle {detail}")
+        if status == STATUS_BAD_GROUP:
+            raise InvalidInput(f"group of vehicle {detail} is outside the requirement's groups")
+        if status == STATUS_BAD_COUNTS:
+            raise InvalidInput("requirement counts must be >= 0 and need at least one vehicle")
+        if status == STATUS_BAD_SPEED:
+            raise InvalidInput(f"speed of vehicle {detail} must be finite and > 0")
+        if status == STATUS_UNMET:
+            raise UnmetRequirement(
+                f"group {detail} needs {counts[detail]} vehicle(s), the fleet has "
+                f"{int((groups == detail).sum())}"
+            )
+        if status == STATUS_UNREACHABLE:
+            raise Unreachable(
+                f"fewer than {counts[detail]} vehicle(s) of group {detail} can reach the target"
+            )
+        route.flags.writeable = False
+        return Assignment(
+            served_by=tuple(best_idx.tolist()),
+            times=tuple(best_time.tolist()),
+            mover=int(best_idx[mover_slot]),
+            completion_time=float(best_time[mover_slot]),
+            mover_cost=float(best_cost[mover_slot]),
+            route=route,
+        )
+
+    def path_cost(self, a: NetPosition, b: NetPosition) -> float:
+        """Directed cost from position ``a`` to position ``b``.
+
+        Raises
+        ------
+        InvalidInput
+            If a position is not on the network.
+        Unreachable
+            If ``b`` cannot be reached from ``a``.
+        """
+        check_position(self.network, a, what="source")
+        return self.assign(b, [a], _UNIT_SPEED, _ONE_VEHICLE).mover_cost
+
+    def cost_matrix(
+        self, sources: Sequence[NetPosition], targets: Sequence[NetPosition]
+    ) -> FloatArray:
+        """Directed costs from every source to every target, shape ``(len(sources), len(targets))``.
+
+        Uses scipy's Dijkstra, one run per distinct source edge (see
+        :func:`routing_svc.network.costs.cost_matrix`).
+        """
+        costs = cost_matrix(self.network, self._costs, sources, targets)
+        if self.either_way and len(sources):
+            twins = [twin(self.network, p) for p in sources]
+            rows = [i for i, t in enumerate(twins) if t is not None]
+            if rows:
+                alt = cost_matrix(
+                    self.network, self._costs, [twins[i] for i in rows], targets  # type: ignore[misc]
+                )
+                costs[rows] = np.minimum(costs[rows], alt)
+        return costs
+
+    def advance(
+        self, position: NetPosition, target: NetPosition, route: object, amount: float
+    ) -> NetPosition:
+        """Move ``position`` a cost ``amount`` along ``route`` toward ``target``.
+
+        ``route`` is the one :meth:`assign` returned for this position and target.
+
+        An ``amount`` at least the route's cost gives exactly ``target``.
+
+        Raises
+        ------
+        InvalidInput
+            If a position, the route or the amount is invalid.
+        """
+        check_position(self.network, position, what="position")
+        check_position(self.network, target, what="target")
+        if (
+            self.either_way
+            and isinstance(route, np.ndarray)
+            and route.shape[0] > 0
+            and int(route[0]) != position.edge
+        ):
+            other = twin(self.network, position)
+            if other is not None and other.edge == int(route[0]):
+                position = other
+        edges = check_route(self.network, position, target, route)
+        return walk_route(self.network, self._costs, position, target, edges, amount)
+
+    def perturb(
+        self, position: NetPosition, amount: float, rng: np.random.Generator
+    ) -> NetPosition:
+        """Drive a cost ``amount`` forward from ``position``, choosing successors at random."""
+        check_position(self.network, position, what="position")
+        return random_walk(self.network, self._costs, position, amount, rng)
+
+    def typical_cost(self) -> float:
+        """The median cost between edge midpoints of a fixed random sample.
+
+        Draws (with a fixed seed, so the value is deterministic) up to 32
+        source and 256 target edges, and returns the median of the costs from
+        the middle of each source edge to the middle of each target edge.
+        Computed once per space.
+        """
+        if self._typical is None:
+            rng = np.random.default_rng(_TYPICAL_SEED)
+            n = self.network.n_edges
+            half = self.network.length / 2.0
+            picks = [
+                rng.choice(n, size=min(n, size), replace=False)
+                for size in (_TYPICAL_SOURCES, _TYPICAL_TARGETS)
+            ]
+            sources, targets = ([NetPosition(int(e), float(half[e])) for e in p] for p in picks)
+            self._typical = float(np.median(self.cost_matrix(sources, targets)))
+        return self._typical
+
+    def encode(self, position: NetPosition) -> dict[str, object]:
+        """``{"edge": <SUMO edge id>, "offset": <metres>}``; floats round-trip exactly."""
+        check_position(self.network, position, what="position")
+        return {"edge": self.network.edge_ids[position.edge], "offset": float(position.offset)}
+
+    def decode(self, data: dict[str, object]) -> NetPosition:
+        """Inverse of :meth:`encode`.
+
+        Raises
+        ------
+        InvalidInput
+            If a key is missing or the offset is not a finite number on the edge.
+        UnknownEdge
+            If the edge id is not in the network.
+        """
+        if not isinstance(data, dict) or "edge" not in data or "offset" not in data:
+            raise InvalidInput("a position needs the keys 'edge' and 'offset'")
+        edge_id, offset = data["edge"], data["offset"]
+        if not isinstance(edge_id, str):
+            raise InvalidInput("a position's 'edge' must be a SUMO edge id (string)")
+        edge = self.network.edge_index.get(edge_id)
+        if edge is None:
+            raise UnknownEdge(f"unknown edge {edge_id!r}")
+        if isinstance(offset, bool) or not isinstance(offset, int | float):
+            raise InvalidInput("a position's 'offset' must be a number")
+        position = NetPosition(edge, float(offset))
+        check_position(self.network, position, what="position")
+        return position
+
+    def xy(self, position: NetPosition) -> tuple[float, float]:
+        """Network coordinates of ``position`` on its edge's shape."""
+        check_position(self.network, position, what="position")
+        return point_on_edge(self.network, position.edge, position.offset)
+
+    def lonlat(self, position: NetPosition) -> tuple[float, float]:
+        """``(lon, lat)`` in WGS84 degrees of ``position``.
+
+        Raises
+        ------
+        InvalidInput
+            If the network has no (supported) geographic projection.
+        """
+        projection = self.network.projection
+        if projection is None:
+            raise InvalidInput("the network has no geographic projection")
+        x, y = self.xy(position)
+        lon, lat = projection.to_lonlat(x, y)
+        return float(lon), float(lat)
+
+
+def _on_network(network: CompiledNetwork, edges: IntArray, offsets: FloatArray) -> bool:
+    """Whether every position lies on the network (else the search names the bad one)."""
+    inside = (edges >= 0) & (edges < network.n_edges)
+    if not inside.all():
+        return False
+    lengths = network.length[edges]
+    return bool(((offsets >= 0.0) & (offsets <= lengths)).all())
+
+
+def _requirement_arrays(requirement: Requirement, n_vehicles: int) -> tuple[IntArray, IntArray]:
+    """Contiguous int64 views of the requirement's groups and counts, shape-checked.
+
+    Their values are checked by the search itself.
+    """
+    try:
+        groups = np.ascontiguousarray(requirement.vehicle_groups, dtype=np.int64)
+        counts = np.ascontiguousarray(requirement.counts, dtype=np.int64)
+    except (TypeError, ValueError, AttributeError):
+        raise InvalidInput("a requirement needs integer vehicle groups and counts") from None
+    if groups.shape != (n_vehicles,):
+        raise InvalidInput("the requirement must give one group per vehicle")
+    if counts.ndim != 1:
+        raise InvalidInput("requirement counts must be a 1-d array")
+    return groups, counts

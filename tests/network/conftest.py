@@ -1,0 +1,97 @@
+"""Networks for the road-network tests: a real OSM district and a generated one-way net.
+
+- ``drt``: ``<SUMO_HOME>/tools/game/DRT/osm.net.xml`` from the eclipse-sumo
+  package (Berlin, converted from OpenStreetMap, with a UTM projection);
+- ``oneway``: generated here with ``netgenerate --rand`` where only 60 % of
+  the roads are two-way and no U-turns exist, so many targets can only be
+  reached by driving around a block, and many edges fall outside the largest
+  strongly connected component.
+"""
+
+from __future__ import annotations
+
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sumo
+
+from routing_svc.network import CompiledNetwork, RoadSpace, load_network
+from routing_svc.types import NetPosition
+from tests.network.reference import NxReference
+
+SUMO_HOME = Path(sumo.SUMO_HOME)
+DRT_NET = SUMO_HOME / "tools" / "game" / "DRT" / "osm.net.xml"
+ONEWAY_ARGS = (
+    "--rand",
+    "--rand.iterations=400",
+    "--seed=3",
+    "--bidi-probability=0.6",
+    "--rand.random-lanenumber=false",
+    "--default.lanenumber=1",
+    "--no-turnarounds",
+)
+
+
+@dataclass(frozen=True)
+class NetCase:
+    """A compiled network, the file it came from, and its networkx reference."""
+
+    name: str
+    path: Path
+    network: CompiledNetwork
+    reference: NxReference
+
+    def random_positions(self, rng: np.random.Generator, n: int) -> list[NetPosition]:
+        edges = rng.integers(self.network.n_edges, size=n)
+        return [NetPosition(int(e), float(rng.uniform(0.0, self.network.length[e]))) for e in edges]
+
+    def ids(self, position: NetPosition) -> tuple[str, float]:
+        return self.network.edge_ids[position.edge], position.offset
+
+
+def generate_oneway_net(folder: Path) -> Path:
+    """A one-way-heavy random network made with SUMO's netgenerate."""
+    path = folder / "oneway.net.xml"
+    subprocess.run(
+        [str(SUMO_HOME / "bin" / "netgenerate"), *ONEWAY_ARGS, "--output-file", str(path)],
+        check=True,
+        capture_output=True,
+    )
+    return path
+
+
+@pytest.fixture(scope="session")
+def network_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("compiled")
+
+
+@pytest.fixture(scope="session")
+def oneway_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return generate_oneway_net(tmp_path_factory.mktemp("oneway"))
+
+
+@pytest.fixture(scope="session")
+def drt_case(network_cache: Path) -> NetCase:
+    network = load_network(DRT_NET, cache_dir=network_cache)
+    return NetCase("drt", DRT_NET, network, NxReference(DRT_NET))
+
+
+@pytest.fixture(scope="session")
+def oneway_case(network_cache: Path, oneway_path: Path) -> NetCase:
+    network = load_network(oneway_path, cache_dir=network_cache)
+    return NetCase("oneway", oneway_path, network, NxReference(oneway_path))
+
+
+@pytest.fixture(scope="session", params=["drt", "oneway"])
+def case(request: pytest.FixtureRequest) -> NetCase:
+    """Each test network in turn."""
+    result: NetCase = request.getfixturevalue(f"{request.param}_case")
+    return result
+
+
+@pytest.fixture
+def space(case: NetCase) -> RoadSpace:
+    return RoadSpace(case.network, either_way=False)
