@@ -240,10 +240,9 @@ class RoadSpace:
         if self.either_way and len(sources):
             twins = [twin(self.network, p) for p in sources]
             rows = [i for i, t in enumerate(twins) if t is not None]
+            alternatives = [t for t in twins if t is not None]
             if rows:
-                alt = cost_matrix(
-                    self.network, self._costs, [twins[i] for i in rows], targets  # type: ignore[misc]
-                )
+                alt = cost_matrix(self.network, self._costs, alternatives, targets)
                 costs[rows] = np.minimum(costs[rows], alt)
         return costs
 

@@ -31,10 +31,11 @@ def reverse_edges(network: CompiledNetwork) -> IntArray:
     Where several edges join the same two junctions the lowest index is taken.
     """
     rev = np.full(network.n_edges, -1, dtype=np.int64)
+    ends = list(zip(network.edge_from.tolist(), network.edge_to.tolist(), strict=True))
     by_ends: dict[tuple[int, int], int] = {}
-    for e, (a, b) in enumerate(zip(network.edge_from.tolist(), network.edge_to.tolist(), strict=True)):
+    for e, (a, b) in enumerate(ends):
         by_ends.setdefault((a, b), e)
-    for e, (a, b) in enumerate(zip(network.edge_from.tolist(), network.edge_to.tolist(), strict=True)):
+    for e, (a, b) in enumerate(ends):
         if a != b:
             rev[e] = by_ends.get((b, a), -1)
     rev.flags.writeable = False

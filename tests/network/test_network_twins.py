@@ -71,9 +71,7 @@ def test_either_way_costs_match_networkx(case: NetCase) -> None:
         best = int(min(range(6), key=lambda i: (expected[i], i)))
         assert found.served_by == (best,)
         np.testing.assert_allclose(found.completion_time, expected[best], rtol=1e-9)
-        np.testing.assert_allclose(
-            space.cost_matrix(vehicles, [target])[:, 0], expected, rtol=1e-9
-        )
+        np.testing.assert_allclose(space.cost_matrix(vehicles, [target])[:, 0], expected, rtol=1e-9)
 
 
 def test_either_way_never_costs_more_than_forward_only(case: NetCase) -> None:
