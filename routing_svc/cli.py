@@ -14,34 +14,39 @@ from collections.abc import Sequence
 
 from routing_svc.errors import RoutingSvcError
 
-COMMANDS: dict[str, str] = {
-    "serve": "routing_svc.service.command",
-    "replay": "routing_svc.service.replay_command",
-    "nets": "routing_svc.nets",
-    "optimum": "routing_svc.optimum.command",
-    "simulate": "routing_svc.simulate",
-    "cosim": "routing_svc.sim.command",
-    "paper": "routing_svc.paper.command",
+COMMANDS: dict[str, tuple[str, str]] = {
+    "serve": ("routing_svc.service.command", "run the REST service with the dashboard"),
+    "replay": ("routing_svc.service.replay_command", "replay event logs, check bit for bit"),
+    "nets": ("routing_svc.nets", "list the generated and the eclipse-sumo networks"),
+    "optimum": ("routing_svc.optimum.command", "exact / best-known p-median as JSON"),
+    "simulate": ("routing_svc.simulate", "offline SA run with the gap to the optimum"),
+    "cosim": ("routing_svc.sim.command", "SUMO co-simulation of the fleet in traffic"),
+    "paper": ("routing_svc.paper.command", "the paper's other scenarios as experiments"),
 }
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser; only ``command``'s module is imported (all of them when ``None``)."""
     parser = argparse.ArgumentParser(
         prog="routing-svc",
         description="Keeps a vehicle fleet where it is needed: stochastic-approximation "
         "deployment on SUMO road networks.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module_name in COMMANDS.values():
-        module = importlib.import_module(module_name)
-        module.add_parser(sub)
+    for name, (module_name, summary) in COMMANDS.items():
+        if command is None or name == command:
+            importlib.import_module(module_name).add_parser(sub)
+        else:
+            sub.add_parser(name, help=summary)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``routing-svc``."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    words = list(sys.argv[1:] if argv is None else argv)
+    chosen = next((w for w in words if w in COMMANDS), None)
+    parser = build_parser(chosen)
+    args = parser.parse_args(words)
     try:
         code: int = args.run(args)
     except RoutingSvcError as exc:

@@ -15,7 +15,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Generic
+from typing import Any
 
 import numpy as np
 
@@ -23,23 +23,22 @@ from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput
 from routing_svc.optimum import expected_cost, solve_pmedian
 from routing_svc.sa import Annealing, Fleet, FleetConfig, Objective, Vehicle, default_schedule
-from routing_svc.sa.space import P, Space
 
 
 @dataclass(frozen=True)
-class Scenario(Generic[P]):
+class Scenario:
     """A space, its demand, the candidate sites of the optimum and the start positions."""
 
-    space: Space[P]
-    demand: DemandDistribution[P]
-    sites: list[P]
-    starts: list[P]
+    space: Any
+    demand: DemandDistribution[Any]
+    sites: list[Any]
+    starts: list[Any]
     describe: Any
 
 
 def network_scenario(
     net: str, *, demand: str, vehicles: int, cost: str, rng: np.random.Generator
-) -> Scenario[Any]:
+) -> Scenario:
     """A road-network scenario (``net`` is a known name or a path)."""
     from routing_svc.demand import network as network_demand
     from routing_svc.nets import resolve_network
@@ -54,7 +53,7 @@ def network_scenario(
         dist = network_demand.uniform_by_length(network)
     elif kind == "hotspots":
         count = int(arg) if arg else 3
-        dist = network_demand.hotspot_mixture(network, count=count, spread=None, rng=rng)
+        dist = network_demand.hotspot_mixture(network, centres=count, rng=rng)
     elif Path(demand).is_file():
         dist = network_demand.from_weights_file(network, Path(demand))
     else:
@@ -72,7 +71,7 @@ def network_scenario(
     return Scenario(space, dist, list(sites), starts, describe)
 
 
-def plane_scenario(*, demand: str, vehicles: int, rng: np.random.Generator) -> Scenario[Any]:
+def plane_scenario(*, demand: str, vehicles: int, rng: np.random.Generator) -> Scenario:
     """The unit-free plane ``[0, 10]^2`` of the paper."""
     from routing_svc.demand import gaussian_mixture, uniform_rectangle
     from routing_svc.sa import EuclideanPlane
@@ -87,14 +86,14 @@ def plane_scenario(*, demand: str, vehicles: int, rng: np.random.Generator) -> S
         centres = [tuple(c) for c in rng.uniform(1.5, 8.5, size=(count, 2))]
         dist = gaussian_mixture(bounds, centres=centres, spread=1.0, cells=30)
     else:
-        raise InvalidInput(f"on the plane --demand must be 'uniform' or 'hotspots[:K]'")
+        raise InvalidInput("on the plane --demand must be 'uniform' or 'hotspots[:K]'")
     space = EuclideanPlane(side=10.0)
     starts = [PlanePosition(float(x), float(y)) for x, y in rng.uniform(0, 10, size=(vehicles, 2))]
     return Scenario(space, dist, list(dist.positions), starts, space.encode)
 
 
 def run_simulation(
-    scenario: Scenario[Any],
+    scenario: Scenario,
     *,
     targets: int,
     objective: Objective,
@@ -124,14 +123,18 @@ def run_simulation(
 
     def value() -> float:
         return expected_cost(
-            space, fleet.state.positions, speeds, scenario.demand, power=objective.power  # type: ignore[arg-type]
+            space,
+            fleet.state.positions,
+            speeds,
+            scenario.demand,
+            power=objective.power,
         )
 
     started = time.perf_counter()
-    matrix = space.cost_matrix(scenario.sites, list(scenario.demand.positions)) ** objective.power  # type: ignore[attr-defined]
+    matrix = space.cost_matrix(scenario.sites, list(scenario.demand.positions)) ** objective.power
     optimum = solve_pmedian(matrix, np.asarray(scenario.demand.weights), n)
     optimum_seconds = time.perf_counter() - started
-    marks = sorted({int(round(x)) for x in np.linspace(0, targets, checkpoints + 1)})
+    marks = sorted({round(x) for x in np.linspace(0, targets, checkpoints + 1)})
     curve = [{"targets": 0, "expected_cost": value()}]
     stream = scenario.demand.sample(rng, targets)
     sa_seconds = 0.0
@@ -181,8 +184,13 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--demand", default="hotspots:3", help="uniform | hotspots[:K] | weights file")
     p.add_argument("--cost", choices=["length", "time"], default="length")
     p.add_argument("--objective", default="routing", help="routing | coverage | power q >= 1")
-    p.add_argument("--annealing", type=float, default=None, metavar="SCALE",
-                   help="annealing noise scale as a fraction of the typical trip cost")
+    p.add_argument(
+        "--annealing",
+        type=float,
+        default=None,
+        metavar="SCALE",
+        help="annealing noise scale as a fraction of the typical trip cost",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--checkpoints", type=int, default=20)
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -18,7 +18,7 @@ from routing_svc.service.fleets import FleetService
 from routing_svc.service.guards import Guards
 from routing_svc.service.networks import NetworkRegistry
 from routing_svc.service.problems import install_problem_handlers
-from routing_svc.service.routes import fleets, health, networks, targets
+from routing_svc.service.routes import dashboard, fleets, health, networks, stream, targets
 from routing_svc.service.settings import Settings
 from routing_svc.store import EventLog
 
@@ -50,9 +50,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         log = EventLog(settings.database_url).open()
-        registry = NetworkRegistry(
-            data_dir=settings.data_dir, max_bytes=settings.max_network_bytes
-        )
+        registry = NetworkRegistry(data_dir=settings.data_dir, max_bytes=settings.max_network_bytes)
         feeder: asyncio.Task[None] | None = None
         try:
             load_networks(registry, log, settings)
@@ -75,11 +73,18 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app = FastAPI(
         title="routing_svc",
         version=__version__,
-        summary="Keeps a vehicle fleet where it is needed (stochastic approximation on road networks).",
+        summary="Keeps a vehicle fleet where it is needed (stochastic approximation).",
         lifespan=lifespan,
     )
     install_problem_handlers(app)
-    for router in (health.router, networks.router, fleets.router, targets.router):
+    for router in (
+        health.router,
+        networks.router,
+        fleets.router,
+        targets.router,
+        stream.router,
+        dashboard.router,
+    ):
         app.include_router(router)
     app.add_middleware(
         Guards,

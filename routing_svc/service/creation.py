@@ -50,7 +50,9 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
     schedule = (
         schedule_from_dict(spec.step.to_dict())
         if spec.step is not None
-        else default_schedule(typical_cost=space.typical_cost(), n_vehicles=n, power=objective.power)
+        else default_schedule(
+            typical_cost=space.typical_cost(), n_vehicles=n, power=objective.power
+        )
     )
     config = FleetConfig(
         objective=objective,

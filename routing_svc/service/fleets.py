@@ -171,7 +171,9 @@ class FleetService:
     ) -> list[tuple[NetPosition, list[str] | None]]:
         with self._locked(fleet_id):
             entry = self._runtime(fleet_id, fresh=False).entry
-        return [(entry.resolve(t.position), list(t.requires) if t.requires else None) for t in targets]
+        return [
+            (entry.resolve(t.position), list(t.requires) if t.requires else None) for t in targets
+        ]
 
     def post_targets(
         self,
@@ -195,7 +197,7 @@ class FleetService:
         return self._append(fleet_id, compute, idempotency_key=idempotency_key, digest=digest)
 
     def assign(self, fleet_id: str, target: TargetSpec) -> dict[str, Any]:
-        (position, requires), = self._resolve_targets(fleet_id, [target])
+        ((position, requires),) = self._resolve_targets(fleet_id, [target])
         with self._locked(fleet_id):
             runtime = self._runtime(fleet_id)
             d = runtime.fleet.assign(position, requires)
@@ -241,12 +243,16 @@ class FleetService:
         )
         self._replay(runtime, events[1:])
         if runtime.version != record.version:
-            raise ReplayMismatch(f"replay reached version {runtime.version}, stored {record.version}")
+            raise ReplayMismatch(
+                f"replay reached version {runtime.version}, stored {record.version}"
+            )
         identical = None
         if record.state_json is not None and record.snapshot_version == record.version:
             identical = runtime.snapshot_json() == record.state_json
             if not identical:
-                raise ReplayMismatch(f"fleet {fleet_id!r}: replayed state differs from the stored state")
+                raise ReplayMismatch(
+                    f"fleet {fleet_id!r}: replayed state differs from the stored state"
+                )
         return {
             "fleet": fleet_id,
             "version": runtime.version,

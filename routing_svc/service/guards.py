@@ -10,7 +10,6 @@ from __future__ import annotations
 import hmac
 import json
 
-
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from routing_svc.service.problems import PROBLEM
@@ -22,7 +21,12 @@ async def send_problem(send: Send, status: int, title: str, detail: str) -> None
     """Answer with a problem+json document straight from the ASGI layer."""
     slug = title.lower().replace(" ", "-")
     body = json.dumps(
-        {"type": f"urn:routing-svc:problem:{slug}", "title": title, "status": status, "detail": detail}
+        {
+            "type": f"urn:routing-svc:problem:{slug}",
+            "title": title,
+            "status": status,
+            "detail": detail,
+        }
     ).encode()
     await send(
         {

@@ -6,6 +6,7 @@ running server (``--service-url``).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import tempfile
 from collections.abc import Mapping, Sequence
@@ -62,12 +63,10 @@ class InProcessFleetClient:
 
     def add_network(self, path: Path, *, name: str | None = None) -> dict[str, Any]:
         entry = self.networks.load(name or Path(path).name.split(".")[0], Path(path), name=name)
-        try:
+        with contextlib.suppress(Conflict):
             self.log.create_network(
                 entry.id, sha256=entry.network.source_sha256, path=str(path), name=entry.name
             )
-        except Conflict:
-            pass
         return entry.summary()
 
     def create_fleet(self, spec: Mapping[str, Any]) -> dict[str, Any]:

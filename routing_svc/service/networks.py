@@ -106,7 +106,9 @@ class NetworkEntry:
                         "type": "Feature",
                         "geometry": {
                             "type": "LineString",
-                            "coordinates": [[round(float(x), 2), round(float(y), 2)] for x, y in pts],
+                            "coordinates": [
+                                [round(float(x), 2), round(float(y), 2)] for x, y in pts
+                            ],
                         },
                         "properties": {
                             "id": edge_id,
@@ -170,4 +172,3 @@ class NetworkRegistry:
             tmp.write_bytes(xml)
             tmp.replace(path)
         return digest, path
-

@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     if args.db is not None and not args.db.is_file():
         raise InvalidInput(f"no database file {str(args.db)!r}")
     url = args.database_url or f"sqlite:///{args.db.resolve()}"
-    settings = Settings(DATABASE_URL=url, data_dir=args.data_dir)
+    settings = Settings(database_url=url, data_dir=args.data_dir)
     with EventLog(url) as log:
         registry = NetworkRegistry(data_dir=args.data_dir, max_bytes=settings.max_network_bytes)
         load_networks(registry, log, settings)

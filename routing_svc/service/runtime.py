@@ -38,7 +38,9 @@ def dumps(data: Any) -> str:
 class FleetRuntime:
     """The in-memory state of one fleet, advanced only by events."""
 
-    def __init__(self, fleet_id: str, entry: NetworkEntry, created: dict[str, Any], *, recent_window: int) -> None:
+    def __init__(
+        self, fleet_id: str, entry: NetworkEntry, created: dict[str, Any], *, recent_window: int
+    ) -> None:
         self.id = fleet_id
         self.entry = entry
         self.created = created

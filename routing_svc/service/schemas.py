@@ -82,9 +82,10 @@ class FleetSpec(Strict):
     id: Identifier
     network: Identifier
     cost: Literal["length", "time"] = "length"
-    objective: Literal["routing", "coverage"] | Annotated[
-        float, Field(allow_inf_nan=False, ge=1.0, le=10.0)
-    ] = "routing"
+    objective: (
+        Literal["routing", "coverage"]
+        | Annotated[float, Field(allow_inf_nan=False, ge=1.0, le=10.0)]
+    ) = "routing"
     step: StepSpec | None = None
     counting: Literal["vehicle", "fleet"] = "vehicle"
     annealing: AnnealingSpec | None = None

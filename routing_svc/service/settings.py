@@ -36,7 +36,9 @@ class Settings(BaseSettings):
         How many recent targets the "recent" mean cost covers.
     """
 
-    model_config = SettingsConfigDict(env_prefix="ROUTING_SVC_", extra="ignore")
+    model_config = SettingsConfigDict(
+        env_prefix="ROUTING_SVC_", extra="ignore", populate_by_name=True
+    )
 
     database_url: str = Field(
         default="sqlite:///var/routing_svc.db",

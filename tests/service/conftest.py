@@ -24,7 +24,7 @@ DRT = str(resolve_network("drt"))
 
 def make_settings(db_url: str, tmp_path: Path, **extra: object) -> Settings:
     return Settings(
-        DATABASE_URL=db_url,
+        database_url=db_url,
         networks={"drt": DRT},
         data_dir=tmp_path / "networks",
         **extra,  # type: ignore[arg-type]
@@ -108,9 +108,7 @@ class LiveServer:
 
 
 @pytest.fixture
-def live_server(
-    db_url: str, tmp_path: Path
-) -> Iterator[Callable[..., LiveServer]]:
+def live_server(db_url: str, tmp_path: Path) -> Iterator[Callable[..., LiveServer]]:
     """``live_server(workers=1)`` starts a server on this test's database."""
     servers: list[LiveServer] = []
 

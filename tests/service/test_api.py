@@ -102,9 +102,10 @@ def test_positions_given_as_xy_and_lonlat_are_snapped(client: TestClient) -> Non
     )
     fleet = client.post("/v1/fleets", json=body).json()
     for v in fleet["vehicles"]:
-        assert v["position"]["edge"] == edge(42) or np.hypot(
-            v["position"]["x"] - x, v["position"]["y"] - y
-        ) < 0.5
+        assert (
+            v["position"]["edge"] == edge(42)
+            or np.hypot(v["position"]["x"] - x, v["position"]["y"] - y) < 0.5
+        )
         assert v["position"]["offset"] == pytest.approx(3.0, abs=0.5)
 
 
@@ -127,7 +128,9 @@ def test_heterogeneous_a_b_ab_fleet(client: TestClient) -> None:
         res = out.json()
         # independent reference: the full cost matrix (scipy Dijkstra), divided by speeds
         vs = fleet["vehicles"]
-        pos = [NetPosition(NET.edge_index[v["position"]["edge"]], v["position"]["offset"]) for v in vs]
+        pos = [
+            NetPosition(NET.edge_index[v["position"]["edge"]], v["position"]["offset"]) for v in vs
+        ]
         times = SPACE.cost_matrix(pos, [NetPosition(e, 0.0)])[:, 0] / [v["speed"] for v in vs]
         expected = []
         for t in sorted(requires):
@@ -168,7 +171,10 @@ def test_batch_equals_single_posts(client: TestClient) -> None:
     client.post("/v1/fleets", json=fleet_body("one")).raise_for_status()
     client.post("/v1/fleets", json=fleet_body("many")).raise_for_status()
     rng = np.random.default_rng(9)
-    targets = [{"position": {"edge": edge(int(e)), "offset": 0.0}} for e in rng.integers(NET.n_edges, size=25)]
+    targets = [
+        {"position": {"edge": edge(int(e)), "offset": 0.0}}
+        for e in rng.integers(NET.n_edges, size=25)
+    ]
     singles = [client.post("/v1/fleets/one/targets", json=t).json() for t in targets]
     batch = client.post("/v1/fleets/many/targets:batch", json={"targets": targets}).json()
     assert [s["new_position"] for s in singles] == [b["new_position"] for b in batch["results"]]
@@ -189,7 +195,9 @@ def test_time_costs_and_travel_times(client: TestClient) -> None:
     assert after["cost"] > before["cost"] + 1e4
     length_fleet = fleet_body("len")
     client.post("/v1/fleets", json=length_fleet).raise_for_status()
-    assert client.put("/v1/fleets/len/traveltimes", json={"times": {edge(1): 3.0}}).status_code == 409
+    assert (
+        client.put("/v1/fleets/len/traveltimes", json={"times": {edge(1): 3.0}}).status_code == 409
+    )
 
 
 def test_reference_demand_gives_a_gap(client: TestClient) -> None:

@@ -31,7 +31,8 @@ def replay_ok(db_url: str, tmp_path: Any) -> dict[str, Any]:
 def targets(seed: int, n: int) -> list[dict[str, Any]]:
     rng = np.random.default_rng(seed)
     return [
-        {"position": {"edge": edge(int(e)), "offset": 0.0}} for e in rng.integers(NET.n_edges, size=n)
+        {"position": {"edge": edge(int(e)), "offset": 0.0}}
+        for e in rng.integers(NET.n_edges, size=n)
     ]
 
 
@@ -89,7 +90,9 @@ def test_kill_9_loses_no_acknowledged_target(
                 if stop.is_set():
                     return
                 try:
-                    r = http.post("/v1/fleets/f1/targets", json=t, headers={"Idempotency-Key": f"k{i}"})
+                    r = http.post(
+                        "/v1/fleets/f1/targets", json=t, headers={"Idempotency-Key": f"k{i}"}
+                    )
                 except httpx.HTTPError:
                     return
                 if r.status_code == 200:

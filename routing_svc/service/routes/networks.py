@@ -48,9 +48,7 @@ async def upload_network(
             entry = registry.load(network_id, path, name=name or network_id)
         except InvalidNetwork:
             raise
-        service.log.create_network(
-            network_id, sha256=digest, path=str(path), name=entry.name
-        )
+        service.log.create_network(network_id, sha256=digest, path=str(path), name=entry.name)
         return entry.summary()
 
     return await run_in_threadpool(register)

@@ -18,7 +18,7 @@ IdempotencyKey = Annotated[str | None, Header(min_length=1, max_length=200)]
 
 TARGETS_APPLIED = Counter("routing_svc_targets_total", "Targets applied (acknowledged)")
 
-TARGET_RESPONSE = {
+TARGET_RESPONSE: dict[int | str, dict[str, Any]] = {
     200: {
         "description": "The target was served and the last-arriving vehicle moved.",
         "content": {"application/json": {"schema": {"type": "object"}}},
@@ -65,7 +65,7 @@ async def post_target_batch(
         )
     )
     TARGETS_APPLIED.inc(len(results))
-    body = '{"version":%d,"results":[%s]}' % (version, ",".join(results))
+    body = '{"version":' + str(version) + ',"results":[' + ",".join(results) + "]}"
     return Response(body, media_type="application/json")
 
 

@@ -1,0 +1,295 @@
+"""HTTP throughput of ``POST /v1/fleets/{id}/targets`` against a trivial FastAPI endpoint.
+
+Both are served by uvicorn (1 worker, same options) and loaded by the same
+generator (``wrk``, Debian package ``wrk``) with the same concurrency, in the
+same run; the ratio of the two is the figure that counts (absolute numbers on
+these machines drift 2x between runs).
+
+The service runs with SQLite (WAL, ``synchronous=FULL``) and a 50-vehicle fleet
+on the BadHersfeld network; with ``--postgres URL`` it also runs against
+PostgreSQL with 1 and 2 service instances (each its own port, wrk spreading
+the load over both).
+
+Usage::
+
+    python bench/http.py [--seconds 10] [--connections 16] [--postgres URL] [--quick]
+
+Prints one JSON document.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+BADHERSFELD = ROOT.parent / "shared" / "nets" / "badhersfeld.net.xml.gz"
+
+TRIVIAL_APP = """
+from fastapi import FastAPI
+from pydantic import BaseModel
+
+class Position(BaseModel):
+    edge: str
+    offset: float = 0.0
+
+class Target(BaseModel):
+    position: Position
+    requires: list[str] | None = None
+
+app = FastAPI()
+
+@app.post("/v1/fleets/{fleet_id}/targets")
+async def post_target(fleet_id: str, target: Target) -> dict:
+    return {"fleet": fleet_id, "edge": target.position.edge, "seq": 1}
+"""
+
+WRK_SCRIPT = """
+local bodies = {%s}
+local paths = {%s}
+local n = 0
+request = function()
+  n = n + 1
+  local body = bodies[(n %% #bodies) + 1]
+  local path = paths[(n %% #paths) + 1]
+  return wrk.format("POST", path, {["Content-Type"] = "application/json"}, body)
+end
+done = function(summary, latency, requests)
+  io.write(string.format("RESULT %%d %%d %%d %%d %%d %%d\\n", summary.requests,
+    summary.errors.status + summary.errors.connect + summary.errors.read + summary.errors.write
+    + summary.errors.timeout, summary.duration, latency:percentile(50), latency:percentile(99),
+    latency.mean))
+end
+"""
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def wait_up(url: str, proc: subprocess.Popen[bytes]) -> None:
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError("server exited during start-up")
+        try:
+            httpx.get(url, timeout=1.0)
+            return
+        except httpx.HTTPError:
+            time.sleep(0.1)
+    raise RuntimeError("server did not start")
+
+
+def start(cmd: list[str], env: dict[str, str], probe: str) -> subprocess.Popen[bytes]:
+    proc = subprocess.Popen(
+        cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+    )
+    wait_up(probe, proc)
+    return proc
+
+
+def stop(proc: subprocess.Popen[bytes]) -> None:
+    os.killpg(proc.pid, signal.SIGTERM)
+    try:
+        proc.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+
+def run_wrk(
+    urls: list[str], paths: list[str], bodies: list[str], *, seconds: int, connections: int
+) -> dict[str, float]:
+    """Run wrk against one or more servers (connections split evenly); sum the results."""
+    with tempfile.TemporaryDirectory() as tmp:
+        script = Path(tmp) / "load.lua"
+        lua_bodies = ",".join("[[" + b + "]]" for b in bodies)
+        lua_paths = ",".join('"' + p + '"' for p in paths)
+        script.write_text(WRK_SCRIPT % (lua_bodies, lua_paths))
+        per = max(1, connections // len(urls))
+        procs = [
+            subprocess.Popen(
+                ["wrk", "-t1", f"-c{per}", f"-d{seconds}s", "--latency", "-s", str(script), url],
+                stdout=subprocess.PIPE,
+                text=True,
+            )
+            for url in urls
+        ]
+        outs = [p.communicate()[0] for p in procs]
+    total = errors = 0
+    duration = 0.0
+    p50: list[float] = []
+    p99: list[float] = []
+    for out in outs:
+        m = re.search(r"RESULT (\d+) (\d+) (\d+) (\d+) (\d+) (\d+)", out)
+        if m is None:
+            raise RuntimeError(f"wrk failed: {out}")
+        total += int(m.group(1))
+        errors += int(m.group(2))
+        duration = max(duration, int(m.group(3)) / 1e6)
+        p50.append(int(m.group(4)) / 1000)
+        p99.append(int(m.group(5)) / 1000)
+    return {
+        "requests": total,
+        "errors": errors,
+        "requests_per_second": total / duration,
+        "p50_ms": max(p50),
+        "p99_ms": max(p99),
+    }
+
+
+def target_bodies(edge_ids: list[str], n: int, seed: int) -> list[str]:
+    rng = np.random.default_rng(seed)
+    return [
+        json.dumps({"position": {"edge": edge_ids[int(i)], "offset": 0.0}})
+        for i in rng.integers(len(edge_ids), size=n)
+    ]
+
+
+def create_fleet(base: str, edge_ids: list[str], fleet_id: str, vehicles: int) -> None:
+    rng = np.random.default_rng(5)
+    body = {
+        "id": fleet_id,
+        "network": "town",
+        "vehicles": [
+            {"id": f"v{i:02d}", "position": {"edge": edge_ids[int(e)], "offset": 0.0}}
+            for i, e in enumerate(rng.choice(len(edge_ids), size=vehicles, replace=False))
+        ],
+    }
+    httpx.post(base + "/v1/fleets", json=body, timeout=60).raise_for_status()
+
+
+def serve_cmd(port: int, net: Path, data_dir: Path) -> list[str]:
+    return [
+        sys.executable, "-m", "routing_svc.cli", "serve", "--port", str(port),
+        "--net", f"town={net}", "--no-demo", "--workers", "1", "--log-level", "warning",
+        "--data-dir", str(data_dir),
+    ]  # fmt: skip
+
+
+def bench_service(
+    *, env: dict[str, str], net: Path, tmp: Path, instances: int, edge_ids: list[str],
+    seconds: int, connections: int, label: str,
+) -> dict[str, Any]:  # fmt: skip
+    ports = [free_port() for _ in range(instances)]
+    procs = [
+        start(serve_cmd(p, net, tmp / "networks"), env, f"http://127.0.0.1:{p}/healthz")
+        for p in ports
+    ]
+    try:
+        base = f"http://127.0.0.1:{ports[0]}"
+        fleets = [f"{label}{i}" for i in range(4)]
+        for fid in fleets:
+            create_fleet(base, edge_ids, fid, 50)
+        bodies = target_bodies(edge_ids, 500, 1)
+        urls = [f"http://127.0.0.1:{p}" for p in ports]
+        single = run_wrk(
+            urls, [f"/v1/fleets/{f}/targets" for f in fleets], bodies,
+            seconds=seconds, connections=connections,
+        )  # fmt: skip
+        batch_bodies = [
+            json.dumps({"targets": [json.loads(b) for b in bodies[i : i + 50]]})
+            for i in range(0, 500, 50)
+        ]
+        batch = run_wrk(
+            urls, [f"/v1/fleets/{f}/targets:batch" for f in fleets], batch_bodies,
+            seconds=max(2, seconds // 2), connections=max(2, connections // 4),
+        )  # fmt: skip
+        batch["targets_per_second"] = batch["requests_per_second"] * 50
+        return {"targets": single, "batch": batch}
+    finally:
+        for proc in procs:
+            stop(proc)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seconds", type=int, default=10)
+    parser.add_argument("--connections", type=int, default=16)
+    parser.add_argument("--net", type=Path, default=BADHERSFELD)
+    parser.add_argument("--postgres", default=None, help="SQLAlchemy URL of an empty database")
+    parser.add_argument("--quick", action="store_true", help="2-second runs")
+    args = parser.parse_args()
+    if shutil.which("wrk") is None:
+        print("bench/http.py needs wrk: apt-get install wrk", file=sys.stderr)
+        return 2
+    if not args.net.is_file():
+        print(f"network {args.net} not found", file=sys.stderr)
+        return 2
+    seconds = 2 if args.quick else args.seconds
+    from routing_svc.network import load_network
+
+    edge_ids = list(load_network(args.net).edge_ids)
+    report: dict[str, Any] = {
+        "benchmark": "POST /v1/fleets/{id}/targets",
+        "baseline": "trivial FastAPI POST endpoint with a pydantic body (same uvicorn, same wrk)",
+        "network": args.net.name,
+        "vehicles_per_fleet": 50,
+        "connections": args.connections,
+        "seconds": seconds,
+    }
+    with tempfile.TemporaryDirectory() as tmpdir:
+        tmp = Path(tmpdir)
+        (tmp / "trivial_app.py").write_text(TRIVIAL_APP)
+        port = free_port()
+        env = {**os.environ, "PYTHONPATH": str(tmp)}
+        trivial = start(
+            [sys.executable, "-m", "uvicorn", "trivial_app:app", "--port", str(port),
+             "--log-level", "warning", "--workers", "1"],
+            env, f"http://127.0.0.1:{port}/docs",
+        )  # fmt: skip
+        try:
+            bodies = target_bodies(edge_ids, 500, 1)
+            report["trivial"] = run_wrk(
+                [f"http://127.0.0.1:{port}"], ["/v1/fleets/x/targets"], bodies,
+                seconds=seconds, connections=args.connections,
+            )  # fmt: skip
+        finally:
+            stop(trivial)
+        sqlite_env = {**os.environ, "DATABASE_URL": f"sqlite:///{tmp / 'bench.db'}"}
+        report["sqlite"] = bench_service(
+            env=sqlite_env, net=args.net, tmp=tmp, instances=1, edge_ids=edge_ids,
+            seconds=seconds, connections=args.connections, label="s",
+        )  # fmt: skip
+        if args.postgres:
+            pg_env = {**os.environ, "DATABASE_URL": args.postgres}
+            for n in (1, 2):
+                report[f"postgresql_{n}_instances"] = bench_service(
+                    env=pg_env, net=args.net, tmp=tmp, instances=n, edge_ids=edge_ids,
+                    seconds=seconds, connections=args.connections, label=f"p{n}_",
+                )  # fmt: skip
+    trivial_rps = report["trivial"]["requests_per_second"]
+    report["ratio_sqlite_vs_trivial"] = (
+        report["sqlite"]["targets"]["requests_per_second"] / trivial_rps
+    )
+    for n in (1, 2):
+        key = f"postgresql_{n}_instances"
+        if key in report:
+            report[f"ratio_{key}_vs_sqlite"] = (
+                report[key]["targets"]["requests_per_second"]
+                / report["sqlite"]["targets"]["requests_per_second"]
+            )
+    report["target_ratio"] = 0.5
+    print(json.dumps(report, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
