@@ -99,15 +99,25 @@ def run_simulation(
     objective: Objective,
     annealing: Annealing | None,
     seed: int,
+    start: str = "first",
     checkpoints: int = 20,
     progress: bool = True,
 ) -> dict[str, Any]:
-    """Run the SA on ``targets`` draws and report the exact objective over time."""
+    """Run the SA on ``targets`` draws and report the exact objective over time.
+
+    ``start`` chooses the first configuration: ``random`` (the scenario's
+    random positions), ``first`` (the first distinct targets of the stream, as
+    MacQueen's online k-means starts) or ``prior:N`` (the p-median of the
+    first ``N`` targets, the paper's "deterministic first configuration that
+    the SA then refines"). Targets used to start count toward ``targets``.
+    """
     from tqdm import tqdm
 
     rng = np.random.default_rng([seed, 1])
     space = scenario.space
     n = len(scenario.starts)
+    stream = scenario.demand.sample(rng, targets)
+    starts, used = starting_positions(scenario, stream, start=start, power=objective.power)
     config = FleetConfig(
         objective=objective,
         schedule=default_schedule(
@@ -116,9 +126,7 @@ def run_simulation(
         annealing=annealing,
         seed=seed,
     )
-    fleet = Fleet.create(
-        space, [(Vehicle(f"v{i:03d}"), p) for i, p in enumerate(scenario.starts)], config
-    )
+    fleet = Fleet.create(space, [(Vehicle(f"v{i:03d}"), p) for i, p in enumerate(starts)], config)
     speeds = np.ones(n)
 
     def value() -> float:
@@ -134,11 +142,10 @@ def run_simulation(
     matrix = space.cost_matrix(scenario.sites, list(scenario.demand.positions)) ** objective.power
     optimum = solve_pmedian(matrix, np.asarray(scenario.demand.weights), n)
     optimum_seconds = time.perf_counter() - started
-    marks = sorted({round(x) for x in np.linspace(0, targets, checkpoints + 1)})
-    curve = [{"targets": 0, "expected_cost": value()}]
-    stream = scenario.demand.sample(rng, targets)
+    marks = sorted({round(x) for x in np.linspace(used, targets, checkpoints + 1)})
+    curve = [{"targets": used, "expected_cost": value()}]
     sa_seconds = 0.0
-    done = 0
+    done = used
     with tqdm(total=targets, disable=not progress, file=sys.stderr, unit="target") as bar:
         for mark in marks[1:]:
             t0 = time.perf_counter()
@@ -155,6 +162,7 @@ def run_simulation(
         "objective": objective.name,
         "annealing": None if annealing is None else annealing.to_dict(),
         "seed": seed,
+        "start": start,
         "step": config.schedule.to_dict(),
         "demand": {"name": scenario.demand.name, "atoms": len(scenario.demand.positions)},
         "curve": curve,
@@ -170,6 +178,36 @@ def run_simulation(
         "sa_microseconds_per_target": 1e6 * sa_seconds / max(targets, 1),
         "positions": [scenario.describe(p) for p in fleet.state.positions],
     }
+
+
+def starting_positions(
+    scenario: Scenario, stream: list[Any], *, start: str, power: float
+) -> tuple[list[Any], int]:
+    """The fleet's first configuration and how many targets of the stream it used."""
+    n = len(scenario.starts)
+    if start == "random":
+        return list(scenario.starts), 0
+    if start == "first":
+        chosen: list[Any] = []
+        used = 0
+        for z in stream:
+            used += 1
+            if z not in chosen:
+                chosen.append(z)
+            if len(chosen) == n:
+                return chosen, used
+        raise InvalidInput(f"the stream has fewer than {n} distinct targets")
+    kind, _, count = start.partition(":")
+    if kind == "prior" and count.isdigit() and int(count) >= n:
+        sample = stream[: int(count)]
+        sites = list(dict.fromkeys(sample))
+        if len(sites) < n:
+            raise InvalidInput(f"the prior sample has fewer than {n} distinct targets")
+        weights = np.array([sample.count(z) for z in sites], dtype=np.float64)
+        matrix = scenario.space.cost_matrix(sites, sites) ** power
+        solution = solve_pmedian(matrix, weights / weights.sum(), n)
+        return [sites[i] for i in solution.sites], int(count)
+    raise InvalidInput(f"--start must be random, first or prior:N with N >= {n}, got {start!r}")
 
 
 def add_parser(sub: Any) -> None:
@@ -192,6 +230,12 @@ def add_parser(sub: Any) -> None:
         help="annealing noise scale as a fraction of the typical trip cost",
     )
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--start",
+        default="first",
+        help="first (the first distinct targets, default) | random | prior:N "
+        "(p-median of the first N targets)",
+    )
     p.add_argument("--checkpoints", type=int, default=20)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=run)
@@ -216,6 +260,7 @@ def run(args: argparse.Namespace) -> int:
         objective=Objective.parse(args.objective),
         annealing=annealing,
         seed=args.seed,
+        start=args.start,
         checkpoints=args.checkpoints,
         progress=not args.quiet,
     )
