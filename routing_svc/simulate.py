@@ -189,9 +189,7 @@ def starting_positions(
         return list(scenario.starts), 0
     if start == "first":
         chosen: list[Any] = []
-        used = 0
-        for z in stream:
-            used += 1
+        for used, z in enumerate(stream, start=1):
             if z not in chosen:
                 chosen.append(z)
             if len(chosen) == n:
