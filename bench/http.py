@@ -19,6 +19,13 @@ Prints one JSON document.
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
+# This file is named like the standard library's ``http`` package: run as a
+# script, its folder comes first on sys.path and would shadow it.
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
+
 import argparse
 import json
 import os

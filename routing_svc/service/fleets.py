@@ -25,6 +25,10 @@ from routing_svc.store import EventLog, EventRecord, NewEvent
 from routing_svc.types import NetPosition
 
 
+SNAPSHOT_EVERY = 64
+"""A snapshot of the state is stored whenever the version crosses a multiple of this."""
+
+
 def request_hash(body: Any) -> str:
     """A digest of a request body, stored with its idempotency key."""
     return hashlib.sha256(dumps(body).encode()).hexdigest()
@@ -95,10 +99,17 @@ class FleetService:
         with self._locked(fleet_id):
             runtime = self._runtime(fleet_id, fresh=False)
 
+            before = [runtime.version]
+
             def build(missed: list[EventRecord]) -> list[NewEvent]:
                 self._replay(runtime, missed)
+                before[0] = runtime.version
                 events: list[NewEvent] = compute(runtime)
                 return events
+
+            def snapshot(version: int) -> str | None:
+                due = version // SNAPSHOT_EVERY != before[0] // SNAPSHOT_EVERY
+                return runtime.snapshot_json() if due else None
 
             try:
                 result = self.log.append(
@@ -107,7 +118,7 @@ class FleetService:
                     build=build,
                     idempotency_key=idempotency_key,
                     request_hash=digest,
-                    snapshot=lambda _version: runtime.snapshot_json(),
+                    snapshot=snapshot,
                 )
             except BaseException:
                 self._cache.pop(fleet_id, None)
@@ -241,22 +252,26 @@ class FleetService:
         runtime = FleetRuntime(
             fleet_id, entry, json.loads(events[0].payload_json), recent_window=self.recent_window
         )
+        identical = None
+        at = record.snapshot_version
+        if record.state_json is not None and at is not None:
+            self._replay(runtime, [e for e in events[1:] if e.seq <= at])
+            identical = runtime.snapshot_json() == record.state_json
+            if not identical:
+                raise ReplayMismatch(
+                    f"fleet {fleet_id!r}: the replayed state at version {at} differs from the "
+                    "stored snapshot"
+                )
         self._replay(runtime, events[1:])
         if runtime.version != record.version:
             raise ReplayMismatch(
                 f"replay reached version {runtime.version}, stored {record.version}"
             )
-        identical = None
-        if record.state_json is not None and record.snapshot_version == record.version:
-            identical = runtime.snapshot_json() == record.state_json
-            if not identical:
-                raise ReplayMismatch(
-                    f"fleet {fleet_id!r}: replayed state differs from the stored state"
-                )
         return {
             "fleet": fleet_id,
             "version": runtime.version,
             "events": len(events),
+            "snapshot_version": at,
             "snapshot_identical": identical,
             "state_sha256": hashlib.sha256(runtime.snapshot_json().encode()).hexdigest(),
         }
