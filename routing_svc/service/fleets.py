@@ -24,7 +24,6 @@ from routing_svc.service.schemas import FleetSpec, TargetSpec
 from routing_svc.store import EventLog, EventRecord, NewEvent
 from routing_svc.types import NetPosition
 
-
 SNAPSHOT_EVERY = 64
 """A snapshot of the state is stored whenever the version crosses a multiple of this."""
 
