@@ -12,7 +12,7 @@ from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 
 from routing_svc import __version__
-from routing_svc.errors import StorageError
+from routing_svc.errors import Conflict, StorageError
 from routing_svc.service.demo import ensure_demo_fleet, feed_demo_targets
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.guards import Guards
@@ -28,15 +28,22 @@ def load_networks(registry: NetworkRegistry, log: EventLog, settings: Settings) 
     for name, path in settings.networks.items():
         entry = registry.load(name, Path(path), name=name)
         known = {n.id: n for n in log.list_networks()}
-        if name in known:
-            if known[name].sha256 != entry.network.source_sha256:
-                raise StorageError(
-                    f"network {name!r} is stored with other content (sha256 {known[name].sha256}) "
-                    f"than {path}; fleets on it would not replay. Use another name."
+        if name not in known:
+            try:
+                log.create_network(
+                    name,
+                    sha256=entry.network.source_sha256,
+                    path=str(Path(path).resolve()),
+                    name=name,
                 )
-        else:
-            log.create_network(
-                name, sha256=entry.network.source_sha256, path=str(Path(path).resolve()), name=name
+                continue
+            except Conflict:
+                # another instance (or worker) starting at the same time registered it first
+                known = {n.id: n for n in log.list_networks()}
+        if known[name].sha256 != entry.network.source_sha256:
+            raise StorageError(
+                f"network {name!r} is stored with other content (sha256 {known[name].sha256}) "
+                f"than {path}; fleets on it would not replay. Use another name."
             )
     for record in log.list_networks():
         if record.id not in registry and Path(record.path).is_file():

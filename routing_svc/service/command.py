@@ -80,12 +80,28 @@ def settings_env(args: argparse.Namespace) -> dict[str, str]:
     return env
 
 
+def check_database(url: str) -> None:
+    """Open the event log once before uvicorn starts (durability check, migrations).
+
+    A database that would lose acknowledged events (PostgreSQL with ``fsync``,
+    ``synchronous_commit`` or ``full_page_writes`` off), an unreachable server
+    or a bad URL then ends ``serve`` with the one-line message of
+    :class:`~routing_svc.errors.StorageError` and exit code 2, instead of a
+    traceback from the application's lifespan.
+    """
+    from routing_svc.store import EventLog
+
+    EventLog(url).open().close()
+
+
 def run(args: argparse.Namespace) -> int:
     import uvicorn
 
     if args.workers < 1:
         raise InvalidInput("--workers must be >= 1")
-    os.environ.update(settings_env(args))
+    env = settings_env(args)
+    check_database(env["DATABASE_URL"])
+    os.environ.update(env)
     base = f"http://{args.host}:{args.port}"
     print(f"routing_svc: API docs at {base}/docs, dashboard at {base}/dashboard", flush=True)
     uvicorn.run(

@@ -1,10 +1,15 @@
 """Fleet operations over the event log: the domain side of the REST API.
 
-Every write goes through :meth:`EventLog.append`: under the fleet's lock the
-cached :class:`FleetRuntime` first replays the events other workers (or hosts)
-wrote since it last looked, then computes the new events; the answer is
-returned only after the transaction committed. A cache that may have diverged
-(an append that failed after computing) is dropped and rebuilt from the log.
+Every write goes through :meth:`EventLog.append_group` (group commit, flat
+combining): a write request joins its fleet's queue; while a commit is in
+progress the requests that arrive wait there, and one of the waiting threads
+becomes the leader, takes everything queued (up to :data:`GROUP_CAP` targets)
+and commits it in one transaction. Under the fleet's lock the cached
+:class:`FleetRuntime` first replays the events other workers (or hosts) wrote
+since it last looked, then computes each request's events in queue order; a
+request that fails with a domain error fails alone. Every answer is returned
+only after the transaction committed. A cache that may have diverged (an
+append that failed after computing) is dropped and rebuilt from the log.
 """
 
 from __future__ import annotations
@@ -12,20 +17,71 @@ from __future__ import annotations
 import hashlib
 import json
 import threading
-from collections.abc import Iterator, Sequence
+from collections import deque
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any
 
-from routing_svc.errors import Conflict, UnknownFleet
+from prometheus_client import Histogram
+
+from routing_svc.errors import Conflict, RoutingSvcError, UnknownFleet
 from routing_svc.service.creation import build_created_payload
 from routing_svc.service.networks import NetworkRegistry
 from routing_svc.service.runtime import FleetRuntime, dumps
 from routing_svc.service.schemas import FleetSpec, TargetSpec
-from routing_svc.store import EventLog, EventRecord, NewEvent
+from routing_svc.store import EventLog, EventRecord, GroupItem, NewEvent
 from routing_svc.types import NetPosition
 
 SNAPSHOT_EVERY = 64
 """A snapshot of the state is stored whenever the version crosses a multiple of this."""
+GROUP_CAP = 256
+"""At most this many targets (or other events) are committed in one group."""
+
+COMMIT_GROUP_SIZE = Histogram(
+    "routing_svc_commit_group_size",
+    "Write requests committed together in one transaction (group commit)",
+    buckets=(1, 2, 4, 8, 16, 32, 64, 128, 256),
+)
+
+Compute = Callable[[FleetRuntime], list[NewEvent]]
+"""``compute(runtime) -> new events``: applies one request to the runtime."""
+
+
+class _Diverged(Exception):
+    """A request failed after changing the runtime: nothing may be written."""
+
+
+class _Pending:
+    """One write request waiting in its fleet's queue."""
+
+    __slots__ = ("compute", "digest", "done", "error", "key", "result", "size")
+
+    def __init__(self, compute: Compute, key: str | None, digest: str | None, size: int) -> None:
+        self.compute = compute
+        self.key = key
+        self.digest = digest
+        self.size = size
+        self.done = False
+        self.result: tuple[list[str], int] | None = None
+        self.error: BaseException | None = None
+
+    def answer(self) -> tuple[list[str], int]:
+        """The result, or raise the error (only once ``done``)."""
+        if self.error is not None:
+            raise self.error
+        assert self.result is not None
+        return self.result
+
+
+class _Queue:
+    """A fleet's write queue and whether a leader is committing from it."""
+
+    __slots__ = ("busy", "cond", "items")
+
+    def __init__(self) -> None:
+        self.cond = threading.Condition()
+        self.items: deque[_Pending] = deque()
+        self.busy = False
 
 
 def request_hash(body: Any) -> str:
@@ -42,6 +98,7 @@ class FleetService:
         self.recent_window = recent_window
         self._cache: dict[str, FleetRuntime] = {}
         self._locks: dict[str, threading.Lock] = {}
+        self._queues: dict[str, _Queue] = {}
         self._locks_guard = threading.Lock()
 
     # -- plumbing ---------------------------------------------------------------
@@ -89,43 +146,137 @@ class FleetService:
     def _append(
         self,
         fleet_id: str,
-        compute: Any,
+        compute: Compute,
         *,
         idempotency_key: str | None = None,
         digest: str | None = None,
+        size: int = 1,
     ) -> tuple[list[str], int]:
-        """Run ``compute(runtime) -> [NewEvent]`` under the log's lock; return results."""
+        """Commit ``compute(runtime) -> [NewEvent]`` with whatever else is queued.
+
+        Parameters
+        ----------
+        fleet_id
+            The fleet.
+        compute
+            Applies the request to the runtime (under the fleet's lock) and
+            returns its events; a :class:`RoutingSvcError` it raises before
+            changing the runtime fails this request alone.
+        idempotency_key, digest
+            The request's idempotency key and request hash.
+        size
+            How many events the request will write, counted against
+            :data:`GROUP_CAP`.
+
+        Returns
+        -------
+        tuple[list[str], int]
+            Each event's result JSON and the ``seq`` of the request's last
+            event (the fleet's version if it wrote none); returned only after
+            the transaction committed.
+        """
+        with self._locks_guard:
+            queue = self._queues.setdefault(fleet_id, _Queue())
+        mine = _Pending(compute, idempotency_key, digest, size)
+        with queue.cond:
+            queue.items.append(mine)
+            while queue.busy and not mine.done:
+                queue.cond.wait()
+            if mine.done:
+                return mine.answer()
+            queue.busy = True
+        try:
+            while not mine.done:
+                with queue.cond:
+                    group = [queue.items.popleft()]
+                    total = group[0].size
+                    while queue.items and total + queue.items[0].size <= GROUP_CAP:
+                        total += queue.items[0].size
+                        group.append(queue.items.popleft())
+                retry = self._commit_group(fleet_id, group)
+                with queue.cond:
+                    for pending in group:
+                        pending.done = pending not in retry
+                    queue.items.extendleft(reversed(retry))
+                    queue.cond.notify_all()
+        finally:
+            with queue.cond:
+                queue.busy = False
+                queue.cond.notify_all()
+        return mine.answer()
+
+    def _commit_group(self, fleet_id: str, group: list[_Pending]) -> list[_Pending]:
+        """Run one :meth:`EventLog.append_group` for ``group``; set each answer.
+
+        Returns
+        -------
+        list[_Pending]
+            The requests to queue again (nothing was written for them): after
+            a request failed having changed the runtime, which is then dropped.
+        """
         with self._locked(fleet_id):
-            runtime = self._runtime(fleet_id, fresh=False)
-
+            try:
+                runtime = self._runtime(fleet_id, fresh=False)
+            except BaseException as exc:
+                for pending in group:
+                    pending.error = exc
+                return []
             before = [runtime.version]
+            diverged: list[_Pending] = []
 
-            def build(missed: list[EventRecord]) -> list[NewEvent]:
+            def build(missed: list[EventRecord], fresh: list[int]) -> list[Any]:
                 self._replay(runtime, missed)
                 before[0] = runtime.version
-                events: list[NewEvent] = compute(runtime)
-                return events
+                out: list[list[NewEvent] | RoutingSvcError] = []
+                for index in fresh:
+                    at = runtime.version
+                    try:
+                        out.append(group[index].compute(runtime))
+                    except RoutingSvcError as exc:
+                        if runtime.version != at:
+                            group[index].error = exc
+                            diverged.append(group[index])
+                            raise _Diverged(str(exc)) from exc
+                        out.append(exc)
+                return out
 
             def snapshot(version: int) -> str | None:
                 due = version // SNAPSHOT_EVERY != before[0] // SNAPSHOT_EVERY
                 return runtime.snapshot_json() if due else None
 
             try:
-                result = self.log.append(
+                items = self.log.append_group(
                     fleet_id,
                     expected_version=runtime.version,
+                    requests=[(p.key, p.digest) for p in group],
                     build=build,
-                    idempotency_key=idempotency_key,
-                    request_hash=digest,
                     snapshot=snapshot,
                 )
+            except _Diverged:
+                self._cache.pop(fleet_id, None)
+                return [p for p in group if p not in diverged]
+            except BaseException as exc:
+                self._cache.pop(fleet_id, None)
+                for pending in group:
+                    pending.error = exc
+                return []
+            COMMIT_GROUP_SIZE.observe(len(group))
+            for pending, item in zip(group, items, strict=True):
+                self._settle(pending, item)
+            try:
+                self._replay(runtime, items[0].missed)  # a group of duplicates builds nothing
             except BaseException:
                 self._cache.pop(fleet_id, None)
-                raise
-            if result.duplicate:
-                self._replay(runtime, result.missed)
-            last = result.events[-1].seq if result.events else result.version
-            return [e.result_json or "{}" for e in result.events], last
+            return []
+
+    @staticmethod
+    def _settle(pending: _Pending, item: GroupItem) -> None:
+        """Set a request's answer from its :class:`GroupItem`."""
+        if item.error is not None:
+            pending.error = item.error
+            return
+        last = item.events[-1].seq if item.events else item.version
+        pending.result = ([e.result_json or "{}" for e in item.events], last)
 
     # -- fleets -----------------------------------------------------------------
 
@@ -179,8 +330,12 @@ class FleetService:
     def _resolve_targets(
         self, fleet_id: str, targets: Sequence[TargetSpec]
     ) -> list[tuple[NetPosition, list[str] | None]]:
-        with self._locked(fleet_id):
-            entry = self._runtime(fleet_id, fresh=False).entry
+        cached = self._cache.get(fleet_id)  # a fleet's network never changes: no lock
+        if cached is not None and not cached.deleted:
+            entry = cached.entry
+        else:
+            with self._locked(fleet_id):
+                entry = self._runtime(fleet_id, fresh=False).entry
         return [
             (entry.resolve(t.position), list(t.requires) if t.requires else None) for t in targets
         ]
@@ -204,7 +359,9 @@ class FleetService:
             return out
 
         digest = request_hash(body) if idempotency_key is not None else None
-        return self._append(fleet_id, compute, idempotency_key=idempotency_key, digest=digest)
+        return self._append(
+            fleet_id, compute, idempotency_key=idempotency_key, digest=digest, size=len(resolved)
+        )
 
     def assign(self, fleet_id: str, target: TargetSpec) -> dict[str, Any]:
         ((position, requires),) = self._resolve_targets(fleet_id, [target])

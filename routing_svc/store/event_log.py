@@ -19,30 +19,51 @@ fleet cannot mistake a new fleet for it.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from types import TracebackType
-from typing import Self
+from typing import Any, Self
 
 import sqlalchemy as sa
 from sqlalchemy.engine import Connection, Engine
 
-from routing_svc.errors import Conflict, InvalidInput, StorageError, UnknownFleet, UnknownNetwork
+from routing_svc.errors import (
+    Conflict,
+    InvalidInput,
+    RoutingSvcError,
+    StorageError,
+    UnknownFleet,
+    UnknownNetwork,
+)
 from routing_svc.store import engine as store_engine
 from routing_svc.store import queries as q
 from routing_svc.store.records import (
     AppendResult,
     EventRecord,
     FleetRecord,
+    GroupItem,
     NetworkRecord,
     NewEvent,
 )
 from routing_svc.store.schema import events, fleets, networks
 
-__all__ = ["FLEET_CREATED", "FLEET_DELETED", "Build", "EventLog", "Snapshot", "open_event_log"]
+__all__ = [
+    "FLEET_CREATED",
+    "FLEET_DELETED",
+    "Build",
+    "BuildGroup",
+    "EventLog",
+    "Snapshot",
+    "open_event_log",
+]
 
 Build = Callable[[list[EventRecord]], Sequence[NewEvent]]
 """``build(missed_events) -> new events``, called under the fleet's lock."""
+BuildGroup = Callable[
+    [list[EventRecord], list[int]], Sequence[Sequence[NewEvent] | RoutingSvcError]
+]
+"""``build(missed_events, fresh_indices) -> per fresh request, its events or its error``."""
 Snapshot = Callable[[int], str | None]
 """``snapshot(new_version) -> state JSON or None``, called after ``build``."""
 
@@ -74,6 +95,9 @@ class EventLog:
         self.url = url
         self.busy_timeout_ms = busy_timeout_ms
         self._engine: Engine | None = None
+        # SQLite has one write lock per database: threads of this process queue
+        # here instead of in SQLite's busy handler, which sleeps between retries.
+        self._sqlite_writer = threading.Lock()
 
     # -- lifecycle -------------------------------------------------------------
 
@@ -272,9 +296,81 @@ class EventLog:
         InvalidInput
             A bad argument, or ``build`` returned something other than events.
         """
+
+        def build_one(missed: list[EventRecord], fresh: list[int]) -> list[Sequence[NewEvent]]:
+            return [build(missed)]
+
+        (item,) = self.append_group(
+            fleet_id,
+            expected_version=expected_version,
+            requests=[(idempotency_key, request_hash)],
+            build=build_one,
+            snapshot=snapshot,
+        )
+        if item.error is not None:
+            raise item.error
+        return AppendResult(fleet_id, item.version, item.events, item.missed, item.duplicate)
+
+    def append_group(
+        self,
+        fleet_id: str,
+        *,
+        expected_version: int,
+        requests: Sequence[tuple[str | None, str | None]],
+        build: BuildGroup,
+        snapshot: Snapshot | None = None,
+    ) -> list[GroupItem]:
+        """Append the events of several requests in one transaction (group commit).
+
+        Parameters
+        ----------
+        fleet_id
+            The fleet.
+        expected_version
+            The version of the caller's cached state; the stored events after
+            it are passed to ``build``.
+        requests
+            One ``(idempotency_key, request_hash)`` per request, in order
+            (either may be ``None``). A known key makes its request a
+            duplicate (its stored events are returned, nothing is built) or,
+            if the hash differs, fails it alone with :class:`Conflict`. A key
+            repeated within the group is handled as a duplicate of its first
+            occurrence: it gets the same events, or the same error.
+        build
+            ``build(missed, fresh) -> [events or error, ...]``, called under the
+            fleet's lock with the missed events and the indices (into
+            ``requests``) of the fresh requests; it returns one entry per fresh
+            request: a list of :class:`NewEvent` (possibly empty: nothing is
+            written and the key is not recorded) or a
+            :class:`~routing_svc.errors.RoutingSvcError` (that request fails
+            alone and nothing of it is written). It is not called when no
+            request is fresh. If it raises, nothing at all is written and the
+            exception propagates.
+        snapshot
+            ``snapshot(new_version) -> state JSON or None``, called once after
+            ``build`` when events were built; a string is saved, in the same
+            transaction, as the fleet's snapshot at ``new_version``.
+
+        Returns
+        -------
+        list[GroupItem]
+            One item per request, in order; returned only after the transaction
+            has committed.
+
+        Raises
+        ------
+        UnknownFleet
+            No such fleet, or it was deleted.
+        Conflict
+            ``expected_version`` is ahead of the log.
+        InvalidInput
+            A bad argument, or ``build`` returned something other than one
+            entry of events or an error per fresh request.
+        """
         q.check_version(expected_version)
-        q.check_key(idempotency_key, "idempotency key")
-        q.check_key(request_hash, "request hash")
+        for key, digest in requests:
+            q.check_key(key, "idempotency key")
+            q.check_key(digest, "request hash")
         with self._write(f"append to fleet {fleet_id!r}") as conn:
             version = int(q.lock_fleet(conn, fleet_id).version)
             if expected_version > version:
@@ -282,30 +378,69 @@ class EventLog:
                     f"fleet {fleet_id!r} is at version {version}; "
                     f"the caller's cache claims version {expected_version}"
                 )
-            if idempotency_key is not None:
-                prior = q.keyed_batch(conn, fleet_id, idempotency_key)
-                if prior:
-                    if prior[0].request_hash != request_hash:
-                        raise Conflict(
-                            f"idempotency key {idempotency_key!r} was used for another request"
-                        )
-                    missed = q.select_events(conn, fleet_id, after=expected_version)
-                    return AppendResult(fleet_id, version, tuple(prior), tuple(missed), True)
-            missed = q.select_events(conn, fleet_id, after=expected_version)
-            new = q.check_new_events(build(list(missed)))
-            rows = q.event_rows(
-                fleet_id,
-                version,
-                new,
-                idempotency_key=idempotency_key,
-                request_hash=request_hash,
-                created_at=q.now(),
-            )
+            stored: dict[str, list[EventRecord]] = {}
+            first_index: dict[str, int] = {}
+            fresh: list[int] = []
+            repeats: dict[int, int] = {}  # index of a repeated key -> its first occurrence
+            for index, (key, _) in enumerate(requests):
+                if key is None:
+                    fresh.append(index)
+                elif key in first_index:
+                    repeats[index] = first_index[key]
+                else:
+                    first_index[key] = index
+                    prior = q.keyed_batch(conn, fleet_id, key)
+                    if prior:
+                        stored[key] = prior
+                    else:
+                        fresh.append(index)
+            missed = tuple(q.select_events(conn, fleet_id, after=expected_version))
+            built: list[list[NewEvent] | RoutingSvcError] = []
+            if fresh:
+                built = _checked_group(build(list(missed), list(fresh)), len(fresh))
+            now = q.now()
+            rows: list[dict[str, Any]] = []
+            outcome: dict[int, tuple[tuple[EventRecord, ...], RoutingSvcError | None]] = {}
+            for index, entry in zip(fresh, built, strict=True):
+                if isinstance(entry, RoutingSvcError):
+                    outcome[index] = ((), entry)
+                    continue
+                key, digest = requests[index]
+                mine = q.event_rows(
+                    fleet_id,
+                    version + len(rows),
+                    entry,
+                    idempotency_key=key,
+                    request_hash=digest,
+                    created_at=now,
+                )
+                rows += mine
+                outcome[index] = (q.records_of_rows(mine), None)
             if rows:
                 q.insert_events(conn, fleet_id, rows, snapshot=snapshot)
-        return AppendResult(
-            fleet_id, version + len(rows), q.records_of_rows(rows), tuple(missed), False
-        )
+        new_version = version + len(rows)
+        items: list[GroupItem] = []
+        for index, (key, digest) in enumerate(requests):
+            first = repeats.get(index, index)
+            duplicate = first != index
+            if key is not None and key in stored:
+                prior_events = stored[key]
+                if prior_events[0].request_hash != digest:
+                    error: RoutingSvcError = Conflict(
+                        f"idempotency key {key!r} was used for another request"
+                    )
+                    items.append(GroupItem(new_version, (), missed, False, error))
+                else:
+                    items.append(GroupItem(new_version, tuple(prior_events), missed, True))
+                continue
+            events_of, failed = outcome[first]
+            if duplicate and requests[first][1] != digest:
+                failed = Conflict(f"idempotency key {key!r} was used for another request")
+            if failed is not None:
+                items.append(GroupItem(new_version, (), missed, False, failed))
+            else:
+                items.append(GroupItem(new_version, events_of, missed, duplicate))
+        return items
 
     def events(self, fleet_id: str, *, after: int = 0, limit: int = 1000) -> list[EventRecord]:
         """Return up to ``limit`` events with ``seq > after``, in order (one page).
@@ -381,7 +516,8 @@ class EventLog:
     def _write(self, what: str) -> Iterator[Connection]:
         """A transaction that holds the write lock (SQLite) until it ends."""
         engine = self._require()
-        with store_engine.storage_errors(what), engine.begin() as conn:
+        gate = self._sqlite_writer if engine.dialect.name == "sqlite" else nullcontext()
+        with gate, store_engine.storage_errors(what), engine.begin() as conn:
             yield conn
 
     @contextmanager
@@ -391,6 +527,23 @@ class EventLog:
         with store_engine.storage_errors(what), engine.connect() as conn:
             conn.execution_options(**{store_engine.BEGIN_MODE: "DEFERRED"})
             yield conn
+
+
+def _checked_group(
+    built: Sequence[Sequence[NewEvent] | RoutingSvcError], expected: int
+) -> list[list[NewEvent] | RoutingSvcError]:
+    """Check ``build``'s answer: one entry of events or an error per fresh request."""
+    if isinstance(built, str | bytes) or not isinstance(built, Sequence):
+        raise InvalidInput("a group build must return a list with one entry per fresh request")
+    entries = list(built)
+    if len(entries) != expected:
+        raise InvalidInput(
+            f"a group build returned {len(entries)} entries for {expected} fresh requests"
+        )
+    return [
+        entry if isinstance(entry, RoutingSvcError) else q.check_new_events(entry)
+        for entry in entries
+    ]
 
 
 def open_event_log(url: str, *, busy_timeout_ms: int = 30_000) -> EventLog:

@@ -11,10 +11,13 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
 
+from routing_svc.errors import RoutingSvcError
+
 __all__ = [
     "AppendResult",
     "EventRecord",
     "FleetRecord",
+    "GroupItem",
     "NetworkRecord",
     "NewEvent",
     "as_utc",
@@ -107,6 +110,37 @@ class AppendResult:
     events: tuple[EventRecord, ...]
     missed: tuple[EventRecord, ...]
     duplicate: bool
+
+
+@dataclass(frozen=True, slots=True)
+class GroupItem:
+    """What :meth:`EventLog.append_group` did for one request of a group.
+
+    Attributes
+    ----------
+    version
+        The fleet's version after the whole group committed (the same for
+        every item of a group).
+    events
+        The events this request wrote; for a duplicate, the events that the
+        first request with the same idempotency key wrote; empty on error.
+    missed
+        The stored events after the caller's ``expected_version`` that existed
+        before the group's own events (the same for every item of a group).
+    duplicate
+        ``True`` when the idempotency key had been used (earlier, or by an
+        earlier request of the same group): nothing was written for it.
+    error
+        The error of a request that failed alone (an idempotency key used for
+        another request, or the domain error its ``build`` entry reported);
+        ``None`` on success.
+    """
+
+    version: int
+    events: tuple[EventRecord, ...]
+    missed: tuple[EventRecord, ...]
+    duplicate: bool
+    error: RoutingSvcError | None = None
 
 
 @dataclass(frozen=True, slots=True)
