@@ -71,7 +71,8 @@ class Guards:
         if method in READ_METHODS:
             await self.app(scope, receive, send)
             return
-        limit = self.max_upload if scope["path"].rstrip("/") == "/v1/networks" else self.max_body
+        upload = scope["path"].rstrip("/") == "/v1/networks"
+        limit = self.max_upload if upload else self.max_body
         declared = headers.get(b"content-length")
         if declared is not None:
             try:
@@ -84,6 +85,11 @@ class Guards:
                     send, 413, "Payload too large", f"the body exceeds the limit of {limit} bytes"
                 )
                 return
+        if upload:
+            # uploads stream straight to their route, which counts the bytes itself
+            # (see routes/networks.py): buffering them here would hold them twice
+            await self.app(scope, receive, send)
+            return
         chunks: list[bytes] = []
         received = 0
         more = True

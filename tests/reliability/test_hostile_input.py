@@ -77,6 +77,7 @@ def test_hostile_inputs_are_rejected_fast_and_small(
         "gzip_bomb_1GiB": gzip_bomb(1024 * MiB),
         "huge_declared_body_70MiB": b"x" * (70 * MiB),
         "huge_chunked_body_70MiB": chunks(70 * MiB),
+        "junk_under_the_limit_60MiB": b"<" * (60 * MiB),
     }
     httpx.post(live.url + "/v1/fleets", json=fleet_body()).raise_for_status()
     assert live.process is not None

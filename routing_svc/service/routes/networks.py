@@ -7,7 +7,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, Query, Request
 from starlette.concurrency import run_in_threadpool
 
-from routing_svc.errors import Conflict, InvalidNetwork
+from routing_svc.errors import Conflict, InvalidNetwork, PayloadTooLarge
 from routing_svc.service.deps import fleet_service, network_registry
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.networks import NetworkRegistry
@@ -26,6 +26,29 @@ NET_BODY = {
 }
 
 
+async def read_limited(request: Request, limit: int) -> bytearray:
+    """The request body, at most ``limit`` bytes, held once in memory.
+
+    With a ``Content-Length`` the buffer is allocated once at that size;
+    without one it grows as chunks arrive. Past ``limit``: ``PayloadTooLarge``.
+    """
+    declared = request.headers.get("content-length")
+    expected = int(declared) if declared and declared.isdigit() else 0
+    data = bytearray(min(expected, limit))
+    size = 0
+    async for chunk in request.stream():
+        if size + len(chunk) > limit:
+            raise PayloadTooLarge(f"the body exceeds the limit of {limit} bytes")
+        if size + len(chunk) <= len(data):
+            data[size : size + len(chunk)] = chunk
+        else:
+            del data[size:]
+            data += chunk
+        size += len(chunk)
+    del data[size:]
+    return data
+
+
 @router.post("", status_code=201, openapi_extra=NET_BODY)
 async def upload_network(
     request: Request,
@@ -34,7 +57,7 @@ async def upload_network(
     name: Annotated[Identifier | None, Query()] = None,
 ) -> dict[str, Any]:
     """Upload a SUMO ``.net.xml`` or ``.net.xml.gz``; it is checked, compiled and kept."""
-    data = await request.body()
+    data = await read_limited(request, registry.max_bytes)
 
     def register() -> dict[str, Any]:
         digest, path = registry.store_upload(data)
