@@ -1,0 +1,215 @@
+"""``routing-svc optimum``: the p-median of a demand distribution on a road network.
+
+::
+
+    routing-svc optimum --net PATH --vehicles P [--demand uniform|hotspots[:K]|FILE]
+        [--cost length|time] [--seed S] [--method auto|milp|heuristic]
+        [--max-sites N] [--time-limit SECONDS]
+
+prints one JSON object: the expected cost of the best configuration found
+(``objective``, in metres or seconds), the vehicle positions (SUMO edge id,
+offset, x, y), how it was found (``method``, ``proven_optimal``,
+``lower_bound``, ``seconds``) and the problem size (``n_sites``,
+``n_demand``). Bad input raises :class:`~routing_svc.errors.RoutingSvcError`,
+which ``routing_svc.cli`` turns into a one-line message and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from routing_svc.demand import DemandDistribution, hotspot_mixture, uniform_by_length
+from routing_svc.demand.network import from_weights_file
+from routing_svc.errors import InvalidInput
+from routing_svc.nets import resolve_network
+from routing_svc.network import CompiledNetwork, RoadSpace, load_network
+from routing_svc.network.costs import CostKind
+from routing_svc.optimum.candidates import candidate_sites, distinct_rows
+from routing_svc.optimum.evaluate import expected_cost
+from routing_svc.optimum.pmedian import Method, solve_pmedian
+from routing_svc.types import NetPosition
+
+#: Hotspots drawn by ``--demand hotspots`` without a count.
+DEFAULT_HOTSPOTS = 3
+
+_UNITS = {"length": "m", "time": "s"}
+_COSTS: dict[str, CostKind] = {"length": "length", "time": "time"}
+_METHODS: dict[str, Method] = {"auto": "auto", "milp": "milp", "heuristic": "heuristic"}
+
+
+def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Register the ``optimum`` command."""
+    parser = subparsers.add_parser(
+        "optimum",
+        help="exact / best-known p-median of a demand distribution, as JSON",
+        description="Place P vehicles to minimise the expected travel cost to a demand "
+        "distribution on a SUMO network (a network p-median); print JSON.",
+    )
+    parser.add_argument("--net", required=True, metavar="PATH", help="a .net.xml[.gz] or a name")
+    parser.add_argument("--vehicles", required=True, type=int, metavar="P", help="fleet size")
+    parser.add_argument(
+        "--demand",
+        default="uniform",
+        metavar="SPEC",
+        help="'uniform' (by road length), 'hotspots[:K]' (K Gaussian hotspots, default 3) "
+        "or a CSV/JSON file of edge_id -> weight",
+    )
+    parser.add_argument("--cost", choices=tuple(_UNITS), default="length")
+    parser.add_argument("--seed", type=int, default=0, help="seed for the hotspot centres")
+    parser.add_argument("--method", choices=tuple(_METHODS), default="auto")
+    parser.add_argument(
+        "--max-sites", type=int, default=None, metavar="N", help="subsample the candidate sites"
+    )
+    parser.add_argument(
+        "--time-limit", type=float, default=60.0, metavar="SECONDS", help="for the exact method"
+    )
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Solve and print the JSON report; return the exit status."""
+    report = optimum_report(
+        net=args.net,
+        vehicles=args.vehicles,
+        demand=args.demand,
+        cost=args.cost,
+        seed=args.seed,
+        method=args.method,
+        max_sites=args.max_sites,
+        time_limit=args.time_limit,
+    )
+    print(json.dumps(report, indent=2))
+    return 0
+
+
+def optimum_report(
+    *,
+    net: str,
+    vehicles: int,
+    demand: str = "uniform",
+    cost: str = "length",
+    seed: int = 0,
+    method: str = "auto",
+    max_sites: int | None = None,
+    time_limit: float = 60.0,
+) -> dict[str, Any]:
+    """Build the network, demand and candidate sites, solve, and report.
+
+    Parameters
+    ----------
+    net : str
+        Network file (or a name known to ``routing_svc.nets``).
+    vehicles : int
+        ``p``, the number of vehicles (``>= 1``).
+    demand : str
+        ``"uniform"``, ``"hotspots"``, ``"hotspots:K"`` or a weights file.
+    cost : {"length", "time"}
+        Edge cost: metres or free-flow seconds.
+    seed : int
+        Seeds the hotspot centres.
+    method : {"auto", "milp", "heuristic"}
+        See :func:`~routing_svc.optimum.pmedian.solve_pmedian`.
+    max_sites : int, optional
+        Subsample the candidate sites to at most this many.
+    time_limit : float
+        Seconds for the exact method.
+
+    Returns
+    -------
+    dict
+        The JSON-ready report.
+
+    Raises
+    ------
+    RoutingSvcError
+        Any bad input (missing file, ``vehicles < 1`` or above the number of
+        sites, a bad demand spec, ...).
+    """
+    if vehicles < 1:
+        raise InvalidInput(f"--vehicles must be >= 1, got {vehicles}")
+    if max_sites is not None and max_sites < 1:
+        raise InvalidInput(f"--max-sites must be >= 1, got {max_sites}")
+    if cost not in _UNITS:
+        raise InvalidInput(f"--cost must be 'length' or 'time', got {cost!r}")
+    if method not in _METHODS:
+        raise InvalidInput(f"--method must be 'auto', 'milp' or 'heuristic', got {method!r}")
+    path = resolve_network(net)
+    network = load_network(path)
+    distribution = demand_from_spec(network, demand, rng=np.random.default_rng(seed))
+    space = RoadSpace(network, cost=_COSTS[cost])
+    candidates = candidate_sites(network, distribution, max_sites=max_sites)
+    matrix = space.cost_matrix(candidates, list(distribution.positions))
+    distinct = distinct_rows(matrix)
+    if vehicles > distinct.size:
+        raise InvalidInput(
+            f"--vehicles {vehicles} exceeds the {distinct.size} distinct candidate sites"
+        )
+    started = time.perf_counter()
+    solution = solve_pmedian(
+        matrix[distinct],
+        distribution.weights,
+        vehicles,
+        method=_METHODS[method],
+        time_limit=time_limit,
+    )
+    seconds = time.perf_counter() - started
+    positions = [candidates[int(distinct[i])] for i in solution.sites]
+    value = expected_cost(space, positions, np.ones(len(positions)), distribution)
+    return {
+        "network": Path(path).name,
+        "demand": distribution.name,
+        "cost": cost,
+        "unit": _UNITS[cost],
+        "vehicles": vehicles,
+        "objective": value,
+        "lower_bound": solution.lower_bound,
+        "positions": [_describe(space, network, p) for p in positions],
+        "method": solution.method,
+        "proven_optimal": solution.proven_optimal,
+        "seconds": seconds,
+        "n_sites": int(distinct.size),
+        "n_demand": len(distribution),
+        "seed": seed,
+    }
+
+
+def demand_from_spec(
+    network: CompiledNetwork, spec: str, *, rng: np.random.Generator
+) -> DemandDistribution[NetPosition]:
+    """``"uniform"``, ``"hotspots[:K]"`` or a weights file, as a distribution.
+
+    Raises
+    ------
+    InvalidInput
+        An unknown spec, a bad hotspot count, or a bad weights file.
+    """
+    kind, colon, count = spec.partition(":")
+    if spec == "uniform":
+        return uniform_by_length(network)
+    if kind == "hotspots":
+        if not colon:
+            return hotspot_mixture(network, centres=DEFAULT_HOTSPOTS, rng=rng)
+        if not count.isdigit() or int(count) < 1:
+            raise InvalidInput(f"--demand hotspots:K needs an integer K >= 1, got {count!r}")
+        return hotspot_mixture(network, centres=int(count), rng=rng)
+    if Path(spec).is_file():
+        return from_weights_file(network, spec)
+    raise InvalidInput(
+        f"--demand must be 'uniform', 'hotspots[:K]' or an existing weights file, got {spec!r}"
+    )
+
+
+def _describe(space: RoadSpace, network: CompiledNetwork, position: NetPosition) -> dict[str, Any]:
+    x, y = space.xy(position)
+    return {
+        "edge": network.edge_ids[position.edge],
+        "offset": position.offset,
+        "x": x,
+        "y": y,
+    }
