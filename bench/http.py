@@ -8,7 +8,11 @@ these machines drift 2x between runs).
 The service runs with SQLite (WAL, ``synchronous=FULL``) and a 50-vehicle fleet
 on the BadHersfeld network; with ``--postgres URL`` it also runs against
 PostgreSQL with 1 and 2 service instances (each its own port, wrk spreading
-the load over both).
+the load over both), and measures the cost of one ``EventLog.append``
+transaction in-process on both backends (one writer on one fleet, four writers
+on four fleets, four writers on one fleet), the figure the scaling plan in
+``docs/scaling.md`` rests on. Fleet ids carry a per-run suffix, so the same
+database can be reused.
 
 Usage::
 
@@ -36,7 +40,9 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -44,6 +50,7 @@ import httpx
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
+RUN = uuid.uuid4().hex[:6]  # suffix of this run's fleet ids
 BADHERSFELD = ROOT.parent / "shared" / "nets" / "badhersfeld.net.xml.gz"
 
 TRIVIAL_APP = """
@@ -76,10 +83,10 @@ request = function()
   return wrk.format("POST", path, {["Content-Type"] = "application/json"}, body)
 end
 done = function(summary, latency, requests)
-  io.write(string.format("RESULT %%d %%d %%d %%d %%d %%d\\n", summary.requests,
+  io.write(string.format("RESULT %%d %%d %%d %%d %%d %%d %%d %%d\\n", summary.requests,
     summary.errors.status + summary.errors.connect + summary.errors.read + summary.errors.write
     + summary.errors.timeout, summary.duration, latency:percentile(50), latency:percentile(99),
-    latency.mean))
+    latency.mean, summary.errors.status, summary.errors.timeout))
 end
 """
 
@@ -140,22 +147,26 @@ def run_wrk(
             for url in urls
         ]
         outs = [p.communicate()[0] for p in procs]
-    total = errors = 0
+    total = errors = status_errors = timeouts = 0
     duration = 0.0
     p50: list[float] = []
     p99: list[float] = []
     for out in outs:
-        m = re.search(r"RESULT (\d+) (\d+) (\d+) (\d+) (\d+) (\d+)", out)
+        m = re.search(r"RESULT (\d+) (\d+) (\d+) (\d+) (\d+) (\d+) (\d+) (\d+)", out)
         if m is None:
             raise RuntimeError(f"wrk failed: {out}")
         total += int(m.group(1))
         errors += int(m.group(2))
+        status_errors += int(m.group(7))
+        timeouts += int(m.group(8))
         duration = max(duration, int(m.group(3)) / 1e6)
         p50.append(int(m.group(4)) / 1000)
         p99.append(int(m.group(5)) / 1000)
     return {
         "requests": total,
         "errors": errors,
+        "non_2xx": status_errors,  # answers other than 2xx/3xx (wrk: errors.status)
+        "timeouts": timeouts,  # no answer within wrk's 2 s timeout (not counted as requests)
         "requests_per_second": total / duration,
         "p50_ms": max(p50),
         "p99_ms": max(p99),
@@ -202,7 +213,7 @@ def bench_service(
     ]
     try:
         base = f"http://127.0.0.1:{ports[0]}"
-        fleets = [f"{label}{i}" for i in range(4)]
+        fleets = [f"{label}{RUN}_{i}" for i in range(4)]
         for fid in fleets:
             create_fleet(base, edge_ids, fid, 50)
         bodies = target_bodies(edge_ids, 500, 1)
@@ -219,11 +230,85 @@ def bench_service(
             urls, [f"/v1/fleets/{f}/targets:batch" for f in fleets], batch_bodies,
             seconds=max(2, seconds // 2), connections=max(2, connections // 4),
         )  # fmt: skip
+        single["targets_per_second"] = single["requests_per_second"]
         batch["targets_per_second"] = batch["requests_per_second"] * 50
-        return {"targets": single, "batch": batch}
+        return {
+            "instances": instances,
+            "targets": single,
+            "batch": batch,
+            "targets_per_second_per_instance": single["targets_per_second"] / instances,
+        }
     finally:
         for proc in procs:
             stop(proc)
+
+
+def _append_loop(log: Any, fid: str, n: int, build: Any, sink: list[float]) -> None:
+    """``n`` appends to ``fid``; the wall time of each goes to ``sink``."""
+    version = 1  # the writer's cache: it gets the events it missed, as a worker does
+    for _ in range(n):
+        t0 = time.perf_counter()
+        version = log.append(fid, expected_version=version, build=build).version
+        sink.append(time.perf_counter() - t0)
+
+
+PAYLOAD = json.dumps({"requires": None, "target": {"edge": "e" * 9, "offset": 0.0}})
+RESULT = json.dumps({"pad": "x" * 480})  # a target event's result is ~500 bytes
+
+
+def bench_store(url: str, *, appends: int) -> dict[str, Any]:
+    """Wall time of ``EventLog.append`` (one ~570-byte event per transaction), in-process.
+
+    ``serial``: one writer, one fleet. ``four_fleets``: four threads, one fleet
+    each (independent row locks; PostgreSQL commits them in parallel, sharing WAL
+    flushes), ``sixteen_fleets`` likewise. ``one_fleet``: four threads on the same fleet
+    (they queue on its row lock; on SQLite every case queues on the file lock).
+    """
+    from routing_svc.store import EventLog, NewEvent
+
+    def build(_missed: Any) -> list[Any]:
+        return [NewEvent("target", PAYLOAD, RESULT)]
+
+    out: dict[str, Any] = {}
+    with EventLog(url) as log:
+        net = f"bench_{RUN}"
+        log.create_network(net, sha256="0" * 64, path="/dev/null", name=net)
+        cases = (
+            ("serial", 1, 1),
+            ("four_fleets", 4, 4),
+            ("sixteen_fleets", 16, 16),
+            ("one_fleet", 4, 1),
+        )
+        for name, threads, fleets in cases:
+            ids = [f"{net}_{name}_{i}" for i in range(fleets)]
+            for fid in ids:
+                log.create_fleet(fid, net, "{}", "{}")
+            per_thread = appends // threads
+            sinks: list[list[float]] = [[] for _ in range(threads)]
+            workers = [
+                threading.Thread(
+                    target=_append_loop, args=(log, ids[i % fleets], per_thread, build, sinks[i])
+                )
+                for i in range(threads)
+            ]
+            t0 = time.perf_counter()
+            for w in workers:
+                w.start()
+            for w in workers:
+                w.join()
+            wall = time.perf_counter() - t0
+            lat = [x for sink in sinks for x in sink]
+            ms = np.array(lat) * 1000
+            out[name] = {
+                "threads": threads,
+                "fleets": fleets,
+                "appends": len(lat),
+                "appends_per_second": len(lat) / wall,
+                "mean_ms": float(ms.mean()),
+                "p50_ms": float(np.percentile(ms, 50)),
+                "p99_ms": float(np.percentile(ms, 99)),
+            }
+    return out
 
 
 def main() -> int:
@@ -282,6 +367,12 @@ def main() -> int:
                     env=pg_env, net=args.net, tmp=tmp, instances=n, edge_ids=edge_ids,
                     seconds=seconds, connections=args.connections, label=f"p{n}_",
                 )  # fmt: skip
+        if args.postgres:
+            appends = 100 if args.quick else 400
+            report["store_append"] = {
+                "sqlite": bench_store(f"sqlite:///{tmp / 'store.db'}", appends=appends),
+                "postgresql": bench_store(args.postgres, appends=appends),
+            }
     trivial_rps = report["trivial"]["requests_per_second"]
     report["ratio_sqlite_vs_trivial"] = (
         report["sqlite"]["targets"]["requests_per_second"] / trivial_rps
@@ -293,6 +384,18 @@ def main() -> int:
                 report[key]["targets"]["requests_per_second"]
                 / report["sqlite"]["targets"]["requests_per_second"]
             )
+    if "postgresql_1_instances" in report:
+        # the PostgreSQL column: targets per second, 1 and 2 instances, next to SQLite's
+        report["targets_per_second"] = {
+            "sqlite": report["sqlite"]["targets"]["targets_per_second"],
+            "postgresql_1_instance": report["postgresql_1_instances"]["targets"][
+                "targets_per_second"
+            ],
+            "postgresql_2_instances": report["postgresql_2_instances"]["targets"][
+                "targets_per_second"
+            ],
+        }
+        report["host_cpus"] = os.cpu_count()
     report["target_ratio"] = 0.5
     print(json.dumps(report, indent=2))
     return 0
