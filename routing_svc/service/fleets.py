@@ -20,13 +20,14 @@ import threading
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 from prometheus_client import Histogram
 
-from routing_svc.errors import Conflict, RoutingSvcError, UnknownFleet
+from routing_svc.errors import Conflict, RoutingSvcError, UnknownFleet, UnknownNetwork
 from routing_svc.service.creation import build_created_payload
-from routing_svc.service.networks import NetworkRegistry
+from routing_svc.service.networks import NetworkEntry, NetworkRegistry
 from routing_svc.service.runtime import FleetRuntime, dumps
 from routing_svc.service.schemas import FleetSpec, TargetSpec
 from routing_svc.store import EventLog, EventRecord, GroupItem, NewEvent
@@ -110,10 +111,24 @@ class FleetService:
         with lock:
             yield
 
+    def network(self, network_id: str) -> NetworkEntry:
+        """A loaded network; one that another instance registered is loaded from its
+        stored path when this host can read it (a shared ``--data-dir``)."""
+        if network_id not in self.networks:
+            record = self.log.get_network(network_id)
+            path = Path(record.path)
+            if not path.is_file():
+                raise UnknownNetwork(
+                    f"network {network_id!r} is registered, but its file {record.path!r} "
+                    "is not readable on this instance (share --data-dir between instances)"
+                )
+            self.networks.load(record.id, path, name=record.name)
+        return self.networks.get(network_id)
+
     def _load(self, fleet_id: str) -> FleetRuntime:
         """Build the runtime from the snapshot and the events after it."""
         record = self.log.get_fleet(fleet_id)
-        entry = self.networks.get(record.network_id)
+        entry = self.network(record.network_id)
         first = self.log.events(fleet_id, after=0, limit=1)[0]
         runtime = FleetRuntime(
             fleet_id, entry, json.loads(first.payload_json), recent_window=self.recent_window
@@ -281,7 +296,7 @@ class FleetService:
     # -- fleets -----------------------------------------------------------------
 
     def create_fleet(self, spec: FleetSpec) -> dict[str, Any]:
-        entry = self.networks.get(spec.network)
+        entry = self.network(spec.network)
         created = build_created_payload(spec, entry)
         runtime = FleetRuntime(spec.id, entry, created, recent_window=self.recent_window)
         self.log.create_fleet(spec.id, entry.id, dumps(created["config"]), dumps(created))
@@ -403,7 +418,7 @@ class FleetService:
         from routing_svc.errors import ReplayMismatch
 
         record = self.log.get_fleet(fleet_id, include_deleted=True)
-        entry = self.networks.get(record.network_id)
+        entry = self.network(record.network_id)
         events = self.log.events_since(fleet_id, 0)
         runtime = FleetRuntime(
             fleet_id, entry, json.loads(events[0].payload_json), recent_window=self.recent_window

@@ -221,3 +221,17 @@ def test_start_at_the_optimum_of_a_prior_sample(client: TestClient) -> None:
     edges = sorted(v["position"]["edge"] for v in r.json()["vehicles"])
     # two vehicles for two demand points: each sits on one (cost 0)
     assert edges == sorted([edge(10), edge(400)])
+
+
+def test_a_network_uploaded_through_one_instance_serves_another(
+    db_url: str, make_client: Any
+) -> None:
+    first = make_client(db_url)
+    second = make_client(db_url)  # same database and --data-dir, like two instances on one host
+    with open(DRT, "rb") as f:
+        r = first.post("/v1/networks", params={"name": "town"}, content=f.read())
+    assert r.status_code == 201, r.text
+    assert second.get("/v1/networks/town").json()["sha256"] == r.json()["sha256"]
+    created = second.post("/v1/fleets", json=fleet_body(network="town"))
+    assert created.status_code == 201, created.text
+    assert first.get("/v1/fleets/f1").json()["network"] == "town"

@@ -87,16 +87,17 @@ async def list_networks(
 
 @router.get("/{network_id}")
 async def get_network(
-    network_id: str, registry: Annotated[NetworkRegistry, Depends(network_registry)]
+    network_id: str, service: Annotated[FleetService, Depends(fleet_service)]
 ) -> dict[str, Any]:
     """One network's counts and bounds."""
-    return registry.get(network_id).summary()
+    entry = await run_in_threadpool(service.network, network_id)
+    return entry.summary()
 
 
 @router.get("/{network_id}/geometry")
 async def get_geometry(
-    network_id: str, registry: Annotated[NetworkRegistry, Depends(network_registry)]
+    network_id: str, service: Annotated[FleetService, Depends(fleet_service)]
 ) -> dict[str, Any]:
     """GeoJSON of the usable edges, in the network's own coordinates."""
-    entry = registry.get(network_id)
+    entry = await run_in_threadpool(service.network, network_id)
     return await run_in_threadpool(entry.geometry)
