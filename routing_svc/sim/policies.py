@@ -1,0 +1,112 @@
+"""The policies a co-simulation compares, all on identical demand.
+
+==================  ==========================================================
+``sa``              this product: the service chooses the vehicle whose
+                    reference position is closest and moves it (SA update);
+                    trained first on the historical requests, if any.
+``sa-cold``         the same without history: learning starts with the run.
+``sa-floor``        ``sa`` with a floored, asymptotically constant step
+                    (for tracking demand that moves).
+``static``          the service chooses, reference positions frozen at the
+                    start positions (``assign`` only).
+``optimum``         the service chooses, reference positions frozen at the
+                    (best-known) p-median of the true demand distribution; for
+                    incidents, of the realised requests (hindsight).
+``sumo-stop``       SUMO's taxi device: ``greedy`` dispatch, idle taxis stop
+                    where they are.
+``sumo-circling``   SUMO's taxi device: ``greedy`` dispatch, idle taxis drive
+                    around at random (``randomCircling``).
+==================  ==========================================================
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from routing_svc.errors import InvalidInput
+from routing_svc.sa import InverseScaling, default_schedule
+
+__all__ = ["DEFAULT_POLICIES", "POLICIES", "Policy", "floored_step", "parse_policies"]
+
+
+@dataclass(frozen=True, slots=True)
+class Policy:
+    """How the fleet is positioned and dispatched.
+
+    Attributes
+    ----------
+    name : str
+        The policy's name in reports.
+    dispatch : {"service", "sumo"}
+        ``service``: the co-simulation asks the fleet service (SUMO's taxi
+        dispatch algorithm ``traci``); ``sumo``: SUMO's ``greedy`` dispatcher.
+    learn : bool
+        Whether each request updates the reference positions (SA).
+    positions : {"start", "optimum"}
+        The first reference positions.
+    idle : str
+        SUMO's idle algorithm (``stop`` or ``randomCircling``) for ``sumo``.
+    floor : bool
+        Whether the SA step has a floor (tracking).
+    history : bool
+        Whether the fleet learns from the historical requests before the run.
+    """
+
+    name: str
+    dispatch: Literal["service", "sumo"]
+    learn: bool = False
+    positions: Literal["start", "optimum"] = "start"
+    idle: str = "stop"
+    floor: bool = False
+    history: bool = False
+
+
+POLICIES: dict[str, Policy] = {
+    p.name: p
+    for p in (
+        Policy("sa", "service", learn=True, history=True),
+        Policy("sa-cold", "service", learn=True),
+        Policy("sa-floor", "service", learn=True, floor=True, history=True),
+        Policy("static", "service"),
+        Policy("optimum", "service", positions="optimum"),
+        Policy("sumo-stop", "sumo", idle="stop"),
+        Policy("sumo-circling", "sumo", idle="randomCircling"),
+    )
+}
+"""Every known policy by name."""
+
+DEFAULT_POLICIES = ("sa", "static", "optimum", "sumo-stop", "sumo-circling")
+
+#: The floored step's minimum as a fraction of the default step's ``a``.
+FLOOR_FRACTION = 0.125
+
+
+def parse_policies(text: str | None) -> tuple[Policy, ...]:
+    """Policies from a comma-separated list of names (``None``: the defaults)."""
+    names = DEFAULT_POLICIES if not text else tuple(n.strip() for n in text.split(",") if n.strip())
+    unknown = [n for n in names if n not in POLICIES]
+    if unknown or not names:
+        raise InvalidInput(f"unknown policies {unknown}; known: {', '.join(POLICIES)}")
+    return tuple(POLICIES[n] for n in dict.fromkeys(names))
+
+
+def floored_step(*, typical_cost: float, vehicles: int) -> dict[str, Any]:
+    """The service's default step with a floor of :data:`FLOOR_FRACTION` of its ``a``.
+
+    The default (``routing_svc.sa.schedules.default_schedule``) is
+    ``gamma_k = a / (k + 1)**0.75``; the floored one keeps
+    ``gamma_k >= a / 8``, reached after about 16 updates of a vehicle, so
+    that the fleet keeps following demand that moves (section III-D of the
+    paper) at the price of never settling exactly.
+    """
+    schedule = default_schedule(typical_cost=typical_cost, n_vehicles=vehicles, power=1.0)
+    if not isinstance(schedule, InverseScaling) or not math.isfinite(schedule.a):
+        raise InvalidInput("the default routing schedule is expected to be InverseScaling")
+    return {
+        "kind": "inverse",
+        "a": schedule.a,
+        "power": schedule.power,
+        "floor": schedule.a * FLOOR_FRACTION,
+    }

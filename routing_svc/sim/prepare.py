@@ -1,0 +1,327 @@
+"""The shared inputs of every seed, and the exact objective of the runs afterwards.
+
+:func:`prepare_seeds` writes, per seed, the background traffic and the
+request stream (for ``incidents``, recorded in a SUMO run of the background
+traffic alone, in a worker process), draws the start positions and the
+historical requests, and solves the p-median that the ``optimum`` policy
+uses. :meth:`Prepared.evaluate` turns the recorded reference positions of
+each run into the exact expected free-flow wait under the demand in force
+(the SA objective over time).
+
+History: the requests of an earlier period that the ``sa`` policy learns from
+before the run (as a deployed service would have). For ``persons`` they are
+drawn from the first demand phase with ``default_rng([seed, 5])``; for
+``incidents`` they are recorded like the evaluation stream, in another
+background traffic realisation (randomTrips seed ``seed + 1000``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from routing_svc.demand import DemandDistribution
+from routing_svc.network import CompiledNetwork, RoadSpace, load_network
+from routing_svc.sim.backend import make_backend
+from routing_svc.sim.inputs import FleetVehicle, Request, random_trips, sumo_options, write_persons
+from routing_svc.sim.requests import Destinations, Phase, incident_requests, person_requests
+from routing_svc.sim.run import process_map
+from routing_svc.sim.scenario import (
+    Optimum,
+    build_demand,
+    demand_at,
+    empirical_demand,
+    expected_wait,
+    fleet_vehicles,
+    mixed_demand,
+    solve_optimum,
+    start_positions,
+)
+from routing_svc.types import NetPosition
+
+if TYPE_CHECKING:
+    from routing_svc.sim.experiment import CosimResult, CosimSpec
+
+__all__ = ["IncidentJob", "Prepared", "SeedInputs", "prepare_seeds", "record_incidents"]
+
+#: randomTrips seed offset of the traffic in which incident history is recorded.
+HISTORY_SEED_OFFSET = 1000
+
+
+@dataclass(frozen=True, slots=True)
+class SeedInputs:
+    """What every policy of one seed shares."""
+
+    seed: int
+    workdir: Path
+    routes: tuple[Path, ...]
+    requests: tuple[Request, ...]
+    history: tuple[Request, ...]
+    start_vehicles: tuple[FleetVehicle, ...]
+    optimum_vehicles: tuple[FleetVehicle, ...] | None
+    optimum: Optimum | None
+
+
+@dataclass(frozen=True, slots=True)
+class IncidentJob:
+    """A background-only SUMO run that records incidents (picklable)."""
+
+    net: Path
+    trips: Path
+    seed: int
+    rate: float
+    start: float
+    end: float
+    ride_radius: float
+    tripinfo: Path
+
+
+def record_incidents(job: IncidentJob) -> list[Request]:
+    """Run the background traffic alone and record incidents at its vehicles' places.
+
+    The incidents are saved beside SUMO's output (``<tripinfo>.incidents.json``)
+    and reused while the job is unchanged: they are a deterministic function of it.
+    """
+    saved = job.tripinfo.with_suffix(".incidents.json")
+    key = json.dumps(dataclasses.astuple(job), default=str)
+    if saved.is_file():
+        data = json.loads(saved.read_text(encoding="utf-8"))
+        if data.get("key") == key:
+            return [Request(*item) for item in data["requests"]]
+    requests = _record(job)
+    saved.write_text(
+        json.dumps({"key": key, "requests": [dataclasses.astuple(r) for r in requests]}),
+        encoding="utf-8",
+    )
+    return requests
+
+
+def _record(job: IncidentJob) -> list[Request]:
+    from routing_svc.demand import uniform_by_length
+
+    network = load_network(job.net)
+    destinations = Destinations(network, uniform_by_length(network), radius=job.ride_radius)
+    backend = make_backend("libsumo")
+    backend.start(
+        sumo_options(
+            net=job.net,
+            routes=[job.trips],
+            end=job.end,
+            seed=job.seed,
+            tripinfo=job.tripinfo,
+            dispatch="greedy",
+        )
+    )
+    try:
+        return incident_requests(
+            backend,
+            network,
+            destinations,
+            rng=np.random.default_rng([job.seed, 1]),
+            rate_per_hour=job.rate,
+            start=job.start,
+            end=job.end,
+        )
+    finally:
+        backend.close()
+
+
+def _background(net: Path, trips: Path, *, seed: int, end: float, density: float) -> Path:
+    """randomTrips' file for this seed, reused while its parameters are unchanged."""
+    stamp = trips.with_suffix(".json")
+    params = {"net": str(net), "seed": seed, "end": end, "density": density}
+    if trips.is_file() and stamp.is_file() and json.loads(stamp.read_text()) == params:
+        return trips
+    random_trips(net, trips, seed=seed, end=end, density=density)
+    stamp.write_text(json.dumps(params))
+    return trips
+
+
+@dataclass
+class Prepared:
+    """The network, demand phases and per-seed inputs of an experiment."""
+
+    spec: CosimSpec
+    net: Path
+    network: CompiledNetwork
+    space: RoadSpace
+    phases: list[Phase] | None
+    seeds: list[SeedInputs]
+
+    @property
+    def typical_cost(self) -> float:
+        return self.space.typical_cost()
+
+    def _decode(self, positions: dict[str, tuple[str, float]]) -> list[NetPosition]:
+        index = self.network.edge_index
+        return [NetPosition(index[e], float(o)) for _, (e, o) in sorted(positions.items())]
+
+    def _demand(self, seed: SeedInputs, time: float) -> DemandDistribution[NetPosition]:
+        if self.phases is not None:
+            return demand_at(self.phases, time)
+        return empirical_demand(self.network, seed.requests)
+
+    def evaluate(self, result: CosimResult) -> None:
+        """Fill ``result.curves`` and ``result.optimum_curve`` (exact expected waits)."""
+        by_seed = {s.seed: s for s in self.seeds}
+        for run in result.runs:
+            if run.snapshots:
+                seed = by_seed[run.seed]
+                result.curves[(run.policy, run.seed)] = [
+                    (t, expected_wait(self.space, self._decode(pos), self._demand(seed, t)))
+                    for t, pos in run.snapshots
+                ]
+        phase_optima: dict[float, float] = {}
+        if self.phases is not None and len(self.phases) > 1:
+            for phase in self.phases:
+                best = solve_optimum(self.space, phase.demand, self.spec.vehicles)
+                phase_optima[phase.start] = best.expected_cost
+        for seed in self.seeds:
+            if seed.optimum is None:
+                continue
+            times = sorted({t for r in result.runs if r.seed == seed.seed for t, _ in r.snapshots})
+            if not phase_optima:
+                result.optimum_curve[seed.seed] = [(t, seed.optimum.expected_cost) for t in times]
+                continue
+            first = min(phase_optima)
+            result.optimum_curve[seed.seed] = [
+                (t, phase_optima[max((s for s in phase_optima if s <= t), default=first)])
+                for t in times
+            ]
+
+
+def _phases(spec: CosimSpec, network: CompiledNetwork) -> list[Phase]:
+    """The demand distribution(s) of a ``persons`` run (the hotspots move at ``shift_at``)."""
+    first = build_demand(network, spec.demand, rng=np.random.default_rng([spec.demand_seed, 3]))
+    phases = [Phase(0.0, first)]
+    if spec.shift_at is not None:
+        moved = build_demand(network, spec.demand, rng=np.random.default_rng([spec.demand_seed, 4]))
+        phases.append(Phase(spec.warmup + spec.shift_at, moved))
+    return phases
+
+
+def _incidents(
+    spec: CosimSpec, net: Path, workdirs: dict[int, Path], trips: dict[int, Path], *, progress: bool
+) -> tuple[dict[int, list[Request]], dict[int, list[Request]]]:
+    """Recorded incident streams (evaluation and history) of every seed, in parallel."""
+    start, stop = spec.warmup, spec.warmup + spec.duration
+    jobs = [
+        IncidentJob(
+            net,
+            trips[s],
+            s,
+            spec.rate,
+            start,
+            stop,
+            spec.ride_radius,
+            workdirs[s] / "tripinfo-background.xml",
+        )
+        for s in spec.seeds
+    ]
+    if spec.history > 0:
+        rate = spec.history * 3600.0 / spec.duration
+        for s in spec.seeds:
+            other = _background(
+                net,
+                workdirs[s] / "history.trips.xml",
+                seed=s + HISTORY_SEED_OFFSET,
+                end=spec.end,
+                density=spec.density,
+            )
+            jobs.append(
+                IncidentJob(
+                    net,
+                    other,
+                    s + HISTORY_SEED_OFFSET,
+                    rate,
+                    start,
+                    stop,
+                    spec.ride_radius,
+                    workdirs[s] / "tripinfo-history.xml",
+                )
+            )
+    recorded = process_map(
+        record_incidents,
+        jobs,
+        workers=min(spec.workers, len(jobs)),
+        progress=progress,
+        desc="incidents",
+    )
+    n = len(spec.seeds)
+    requests = dict(zip(spec.seeds, recorded[:n], strict=True))
+    history = dict(zip(spec.seeds, recorded[n:], strict=True)) if spec.history > 0 else {}
+    return requests, history
+
+
+def prepare_seeds(spec: CosimSpec, *, out_dir: Path, progress: bool) -> Prepared:
+    """Write every seed's inputs under ``out_dir/seed<k>`` and solve the optimum."""
+    from routing_svc.demand import uniform_by_length
+    from routing_svc.nets import resolve_network
+
+    net = resolve_network(spec.network).resolve()
+    network = load_network(net)
+    space = RoadSpace(network, cost=spec.cost)
+    workdirs = {seed: out_dir / f"seed{seed}" for seed in spec.seeds}
+    trips = {}
+    for seed, workdir in workdirs.items():
+        workdir.mkdir(parents=True, exist_ok=True)
+        trips[seed] = _background(
+            net, workdir / "background.trips.xml", seed=seed, end=spec.end, density=spec.density
+        )
+    phases = _phases(spec, network) if spec.mode == "persons" else None
+    start, stop = spec.warmup, spec.warmup + spec.duration
+    if phases is not None:
+        destinations = Destinations(network, uniform_by_length(network), radius=spec.ride_radius)
+        requests = {
+            s: person_requests(
+                network,
+                phases,
+                destinations,
+                rng=np.random.default_rng([s, 1]),
+                rate_per_hour=spec.rate,
+                start=start,
+                end=stop,
+            )
+            for s in spec.seeds
+        }
+        history = {
+            s: [
+                Request(f"hist{i:06d}", 0.0, network.edge_ids[p.edge], float(p.offset), "", 0.0)
+                for i, p in enumerate(
+                    phases[0].demand.sample(np.random.default_rng([s, 5]), spec.history)
+                )
+            ]
+            for s in spec.seeds
+        }
+    else:
+        requests, history = _incidents(spec, net, workdirs, trips, progress=progress)
+    shared: Optimum | None = None
+    if phases is not None:
+        shared = solve_optimum(space, mixed_demand(phases, end=stop), spec.vehicles)
+    seeds = []
+    for seed in spec.seeds:
+        persons = write_persons(workdirs[seed] / "requests.rou.xml", requests[seed])
+        starts = start_positions(network, spec.vehicles, rng=np.random.default_rng([seed, 2]))
+        optimum = shared
+        if optimum is None and requests[seed]:
+            optimum = solve_optimum(space, empirical_demand(network, requests[seed]), spec.vehicles)
+        seeds.append(
+            SeedInputs(
+                seed=seed,
+                workdir=workdirs[seed],
+                routes=(trips[seed], persons),
+                requests=tuple(requests[seed]),
+                history=tuple(history.get(seed, ())),
+                start_vehicles=fleet_vehicles(network, starts, prefix="fleet"),
+                optimum_vehicles=None
+                if optimum is None
+                else fleet_vehicles(network, optimum.positions, prefix="fleet"),
+                optimum=optimum,
+            )
+        )
+    return Prepared(spec, net, network, space, phases, seeds)

@@ -1,0 +1,449 @@
+"""Co-simulation runs: one policy, one seed, one SUMO process; many in a process pool.
+
+:func:`run_policy` is a plain function of a picklable :class:`PolicyJob`, so
+several runs go to a process pool (libsumo allows one simulation per
+process). Policies that the service dispatches (``sa``, ``sa-floor``,
+``static``, ``optimum``) run with SUMO's ``traci`` dispatch algorithm and a
+:class:`~routing_svc.sim.dispatcher.FleetDispatcher`; SUMO's own policies run
+with its ``greedy`` dispatcher and nothing in the loop. Either way every wait
+is read from SUMO's tripinfo output afterwards.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+import math
+import multiprocessing
+import sys
+import time
+import uuid
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+from routing_svc.client import FleetClient, HttpFleetClient
+from routing_svc.sim.backend import SimulationError, make_backend
+from routing_svc.sim.dispatcher import FleetDispatcher
+from routing_svc.sim.inputs import FleetVehicle, sumo_options, write_fleet
+from routing_svc.sim.measures import read_tripinfo
+from routing_svc.sim.policies import Policy
+
+__all__ = [
+    "FLEET_PREFIX",
+    "PolicyJob",
+    "PolicyRun",
+    "open_client",
+    "process_map",
+    "run_policy",
+    "run_saved",
+]
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+#: Fleet vehicle ids start with this (background vehicles start with ``bg``).
+FLEET_PREFIX = "fleet"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PolicyJob:
+    """Everything one run needs (picklable; paths are absolute).
+
+    Attributes
+    ----------
+    policy : Policy
+        What to run.
+    seed : int
+        SUMO's seed (the request stream and background traffic are in ``routes``).
+    net : Path
+        The SUMO network.
+    routes : tuple of Path
+        Background traffic and persons route files (shared by every policy).
+    workdir : Path
+        Where the run writes its fleet file and SUMO's tripinfo output.
+    vehicles : tuple of FleetVehicle
+        Ids and first reference positions (start or optimum).
+    end : float
+        Simulated seconds to run.
+    measure_from : float
+        Requests before this time are not counted in the mean waits.
+    cost : str
+        Fleet cost ``time`` or ``length``.
+    step : Mapping, optional
+        The fleet's step schedule (``None``: the service's default).
+    history : tuple of (edge, offset)
+        Historical requests posted as targets before the simulation starts.
+    traffic_period : float, optional
+        Push SUMO's live edge travel times every this many seconds.
+    service_url : str, optional
+        A running service; ``None`` runs it in-process.
+    backend : str
+        ``libsumo`` or ``traci``.
+    gui : bool
+        Show ``sumo-gui`` (TraCI).
+    snapshot_period : float
+        Seconds between records of the reference positions.
+    progress : bool
+        Show a progress bar over simulated time.
+    resume : bool
+        Reuse ``run-<policy>.json`` in ``workdir`` if it was saved for the same job.
+    """
+
+    policy: Policy
+    seed: int
+    net: Path
+    routes: tuple[Path, ...]
+    workdir: Path
+    vehicles: tuple[FleetVehicle, ...]
+    end: float
+    measure_from: float = 0.0
+    cost: str = "time"
+    step: Mapping[str, Any] | None = None
+    history: tuple[tuple[str, float], ...] = ()
+    traffic_period: float | None = None
+    service_url: str | None = None
+    backend: str = "libsumo"
+    gui: bool = False
+    snapshot_period: float = 300.0
+    progress: bool = False
+    resume: bool = False
+
+    def key(self) -> str:
+        """What determines the run's result, as JSON (for reusing a saved run)."""
+        data = {
+            name: getattr(self, name)
+            for name in self.__dataclass_fields__
+            if name not in ("progress", "resume", "gui", "backend", "service_url")
+        }
+        data["policy"] = dataclasses.asdict(self.policy)
+        data["vehicles"] = [dataclasses.astuple(v) for v in self.vehicles]
+        return json.dumps(data, sort_keys=True, default=str)
+
+
+@dataclass(slots=True)
+class PolicyRun:
+    """What one run measured (JSON-ready through :meth:`summary`)."""
+
+    policy: str
+    seed: int
+    requests: int
+    served: int
+    mean_wait: float
+    """Mean SUMO wait (s) of the served requests made after ``measure_from``."""
+    mean_wait_second_half: float
+    """The same over the second half of the request period."""
+    empty_km: float
+    driven_km: float
+    fallbacks: int
+    queued: int
+    failed: int
+    sim_seconds: float
+    wall_seconds: float
+    tripinfo: str
+    traffic_updates: int = 0
+    park_retries: int = 0
+    lost: int = 0
+    """Fleet vehicles that left the simulation before the end (SUMO's tripinfo)."""
+    waits: list[tuple[float, float, bool]] = field(default_factory=list)
+    """``(requested, wait, served)`` of every request, from SUMO's personinfo."""
+    predicted: list[tuple[float, bool]] = field(default_factory=list)
+    """Per request (same order): the service's completion time ``T`` from the chosen
+    reference position (free-flow or live seconds), and whether another vehicle went."""
+    snapshots: list[tuple[float, dict[str, tuple[str, float]]]] = field(default_factory=list)
+    """Reference positions over time (service policies only)."""
+
+    @property
+    def sim_speed(self) -> float:
+        """Simulated seconds per wall-clock second."""
+        return self.sim_seconds / self.wall_seconds if self.wall_seconds > 0 else math.inf
+
+    def to_json(self) -> dict[str, Any]:
+        """Everything, JSON-ready (the inverse of :meth:`from_json`)."""
+        return {
+            **self.summary(),
+            "tripinfo": self.tripinfo,
+            "waits": [list(w) for w in self.waits],
+            "predicted": [list(p) for p in self.predicted],
+            "snapshots": [[t, {k: list(v) for k, v in pos.items()}] for t, pos in self.snapshots],
+        }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> PolicyRun:
+        """A run saved with :meth:`to_json`."""
+        return cls(
+            policy=str(data["policy"]),
+            seed=int(data["seed"]),
+            requests=int(data["requests"]),
+            served=int(data["served"]),
+            mean_wait=float(data["mean_wait_s"]),
+            mean_wait_second_half=float(data["mean_wait_second_half_s"]),
+            empty_km=float(data["empty_km"]),
+            driven_km=float(data["driven_km"]),
+            fallbacks=int(data["fallbacks"]),
+            queued=int(data["queued"]),
+            failed=int(data["failed"]),
+            sim_seconds=float(data["sim_seconds"]),
+            wall_seconds=float(data["wall_seconds"]),
+            tripinfo=str(data["tripinfo"]),
+            traffic_updates=int(data["traffic_updates"]),
+            park_retries=int(data.get("park_retries", 0)),
+            lost=int(data.get("lost", 0)),
+            waits=[(float(t), float(w), bool(ok)) for t, w, ok in data["waits"]],
+            predicted=[(float(t), bool(other)) for t, other in data["predicted"]],
+            snapshots=[
+                (float(t), {k: (str(v[0]), float(v[1])) for k, v in pos.items()})
+                for t, pos in data["snapshots"]
+            ],
+        )
+
+    def summary(self) -> dict[str, Any]:
+        """The headline numbers (no per-request data)."""
+        return {
+            "policy": self.policy,
+            "seed": self.seed,
+            "requests": self.requests,
+            "served": self.served,
+            "mean_wait_s": self.mean_wait,
+            "mean_wait_second_half_s": self.mean_wait_second_half,
+            "empty_km": self.empty_km,
+            "driven_km": self.driven_km,
+            "fallbacks": self.fallbacks,
+            "queued": self.queued,
+            "failed": self.failed,
+            "traffic_updates": self.traffic_updates,
+            "park_retries": self.park_retries,
+            "lost": self.lost,
+            "sim_seconds": self.sim_seconds,
+            "wall_seconds": self.wall_seconds,
+            "sim_speed": self.sim_speed,
+        }
+
+
+def run_saved(job: PolicyJob) -> PolicyRun:
+    """:func:`run_policy`, saving the result as ``run-<policy>.json`` in the job's folder.
+
+    With ``job.resume``, a result saved for the same :meth:`PolicyJob.key` is
+    returned instead of running SUMO again.
+    """
+    path = job.workdir / f"run-{job.policy.name}.json"
+    key = job.key()
+    if job.resume and path.is_file():
+        saved = json.loads(path.read_text(encoding="utf-8"))
+        if saved.get("key") == key:
+            return PolicyRun.from_json(saved["run"])
+    run = run_policy(job)
+    path.write_text(json.dumps({"key": key, "run": run.to_json()}) + "\n", encoding="utf-8")
+    return run
+
+
+def open_client(service_url: str | None) -> FleetClient:
+    """The fleet service: over HTTP at ``service_url``, else in this process."""
+    if service_url:
+        return HttpFleetClient(service_url)
+    from routing_svc.service.inprocess import InProcessFleetClient
+
+    return InProcessFleetClient()
+
+
+def _close(client: FleetClient) -> None:
+    close = getattr(client, "close", None)
+    if callable(close):
+        close()
+
+
+def _fleet_spec(job: PolicyJob, network_id: str, fleet_id: str) -> dict[str, Any]:
+    return {
+        "id": fleet_id,
+        "network": network_id,
+        "cost": job.cost,
+        "objective": "routing",
+        "step": dict(job.step) if job.step is not None else None,
+        "seed": job.seed,
+        "vehicles": [
+            {"id": v.id, "position": {"edge": v.edge, "offset": v.offset}} for v in job.vehicles
+        ],
+    }
+
+
+def _free_flow_times(net: Path) -> dict[str, float]:
+    from routing_svc.network import load_network
+
+    network = load_network(net)
+    return {
+        edge: float(network.length[i] / network.speed[i]) for i, edge in enumerate(network.edge_ids)
+    }
+
+
+def _network_id(net: Path) -> str:
+    stem = net.name.split(".")[0]
+    return "".join(c if c.isalnum() or c in "_.-" else "_" for c in stem)[:100] or "net"
+
+
+def _loop(job: PolicyJob, step_once: Any) -> float:
+    """Step until ``job.end``; return the wall-clock seconds it took."""
+    from tqdm import tqdm
+
+    started = time.perf_counter()
+    with tqdm(
+        total=int(job.end),
+        disable=not job.progress,
+        file=sys.stderr,
+        unit="sim s",
+        desc=f"{job.policy.name} seed {job.seed}",
+        mininterval=0.5,
+    ) as bar:
+        done = 0.0
+        while done < job.end:
+            now = step_once()
+            bar.update(int(now) - int(done))
+            done = now
+    return time.perf_counter() - started
+
+
+def run_policy(job: PolicyJob) -> PolicyRun:
+    """Run one policy in SUMO and read what SUMO measured."""
+    job.workdir.mkdir(parents=True, exist_ok=True)
+    name = job.policy.name
+    lengths = _edge_lengths(job.net, [v.edge for v in job.vehicles])
+    by_service = job.policy.dispatch == "service"
+    fleet_file = write_fleet(
+        job.workdir / f"fleet-{name}.rou.xml", job.vehicles, lengths=lengths, park=by_service
+    )
+    tripinfo = job.workdir / f"tripinfo-{name}.xml"
+    options = sumo_options(
+        net=job.net,
+        routes=[*job.routes, fleet_file],
+        end=job.end,
+        seed=job.seed,
+        tripinfo=tripinfo,
+        dispatch="traci" if by_service else "greedy",
+        idle=job.policy.idle,
+    )
+    backend = make_backend(job.backend, gui=job.gui)
+    client = open_client(job.service_url) if by_service else None
+    fleet_id = f"cosim-{name}-{job.seed}-{uuid.uuid4().hex[:8]}"
+    dispatcher: FleetDispatcher | None = None
+    try:
+        if client is not None:
+            network_id = str(client.add_network(job.net, name=_network_id(job.net))["id"])
+            client.create_fleet(_fleet_spec(job, network_id, fleet_id))
+            for edge, offset in job.history:
+                client.post_target(fleet_id, {"edge": edge, "offset": offset})
+        backend.start(options)
+        if client is not None:
+            dispatcher = FleetDispatcher(
+                backend,
+                client,
+                fleet_id,
+                learn=job.policy.learn,
+                traffic_edges=_free_flow_times(job.net) if job.traffic_period else None,
+                traffic_period=job.traffic_period or 60.0,
+                snapshot_period=job.snapshot_period,
+            )
+
+        def step_once() -> float:
+            backend.step()
+            if dispatcher is not None:
+                dispatcher.on_step()
+            return backend.time()
+
+        wall = _loop(job, step_once)
+        if dispatcher is not None:
+            dispatcher.finish()
+    except SimulationError:
+        raise
+    except Exception as exc:  # SUMO's own exceptions do not cross process boundaries
+        raise SimulationError(f"{name} seed {job.seed}: {type(exc).__name__}: {exc}") from None
+    finally:
+        backend.close()
+        if client is not None:
+            with contextlib.suppress(Exception):  # best effort, e.g. on a server we do not own
+                client.delete_fleet(fleet_id)
+            _close(client)
+    return _result(job, tripinfo, dispatcher, wall)
+
+
+def _edge_lengths(net: Path, edges: Sequence[str]) -> dict[str, float]:
+    from routing_svc.network import load_network
+
+    network = load_network(net)
+    return {e: float(network.length[network.edge_index[e]]) for e in edges}
+
+
+def _result(
+    job: PolicyJob, tripinfo: Path, dispatcher: FleetDispatcher | None, wall: float
+) -> PolicyRun:
+    measures = read_tripinfo(tripinfo, fleet_prefix=FLEET_PREFIX)
+    requested = [r for r in measures.rides if r.requested >= job.measure_from]
+    last = max((r.requested for r in requested), default=job.measure_from)
+    half = job.measure_from + (last - job.measure_from) / 2.0
+    log = dispatcher.log if dispatcher is not None else None
+    return PolicyRun(
+        policy=job.policy.name,
+        seed=job.seed,
+        requests=len(requested),
+        served=sum(1 for r in requested if r.served),
+        mean_wait=measures.mean_wait(since=job.measure_from),
+        mean_wait_second_half=measures.mean_wait(since=half),
+        empty_km=measures.empty_km,
+        driven_km=measures.driven_km,
+        fallbacks=log.fallbacks if log else 0,
+        queued=log.queued if log else 0,
+        failed=log.failed if log else 0,
+        sim_seconds=job.end,
+        wall_seconds=wall,
+        tripinfo=str(tripinfo),
+        traffic_updates=log.traffic_updates if log else 0,
+        park_retries=log.park_retries if log else 0,
+        lost=sum(1 for f in measures.fleet if f.left),
+        waits=[(r.requested, r.wait, r.served) for r in measures.rides],
+        predicted=[
+            (
+                log.predicted.get(r.person, math.nan),
+                log.dispatched.get(r.person) != log.chosen.get(r.person),
+            )
+            for r in measures.rides
+        ]
+        if log
+        else [],
+        snapshots=[(s.time, s.positions) for s in log.snapshots] if log else [],
+    )
+
+
+def process_map(
+    function: Callable[[T], R],
+    items: Sequence[T],
+    *,
+    workers: int,
+    progress: bool,
+    desc: str,
+) -> list[R]:
+    """``[function(item) for item in items]``, on ``workers`` spawned processes.
+
+    Processes are spawned (not forked), so none inherits a running SUMO; with
+    ``workers == 1`` everything runs in this process, one job after another.
+    A bar counts finished jobs when ``progress`` is true.
+    """
+    from tqdm import tqdm
+
+    if not items:
+        return []
+    with tqdm(
+        total=len(items), disable=not progress, file=sys.stderr, desc=desc, unit="run"
+    ) as bar:
+        if workers <= 1:
+            results = []
+            for item in items:
+                results.append(function(item))
+                bar.update(1)
+            return results
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+            futures = [pool.submit(function, item) for item in items]
+            for future in futures:
+                future.add_done_callback(lambda _: bar.update(1))
+            return [f.result() for f in futures]

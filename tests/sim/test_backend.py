@@ -1,0 +1,96 @@
+"""The libsumo backend on its own: reservations, dispatch, parking at a reference."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from routing_svc.sim.backend import LibsumoBackend, Reservation, SimulationError, make_backend
+from routing_svc.sim.inputs import FleetVehicle, Request, sumo_options, write_fleet, write_persons
+
+
+def _start(grid_net: Path, tmp_path: Path, *, requests: list[Request]) -> LibsumoBackend:
+    fleet = write_fleet(
+        tmp_path / "fleet.rou.xml",
+        [FleetVehicle("fleet000", "B2C2", 100.0)],
+        lengths={"B2C2": 200.0},
+        park=True,
+    )
+    persons = write_persons(tmp_path / "persons.rou.xml", requests)
+    backend = LibsumoBackend()
+    backend.start(
+        sumo_options(
+            net=grid_net,
+            routes=[fleet, persons],
+            end=1200,
+            seed=0,
+            tripinfo=tmp_path / "tripinfo.xml",
+            dispatch="traci",
+        )
+    )
+    return backend
+
+
+def test_reservation_dispatch_and_return_to_the_reference(grid_net: Path, tmp_path: Path) -> None:
+    request = Request("p0", 10.0, "D3D4", 50.0, "E4E5", 100.0)
+    backend = _start(grid_net, tmp_path, requests=[request])
+    try:
+        found: list[Reservation] = []
+        while not found:
+            backend.step()
+            found = backend.new_reservations()
+        (reservation,) = found
+        assert (reservation.person, reservation.from_edge) == ("p0", "D3D4")
+        assert reservation.from_pos == pytest.approx(50.0)
+        assert backend.taxi_state("fleet000") == 0
+        assert 0.0 < backend.route_time("B2C2", "D3D4", "fleet") < 600.0
+        backend.dispatch("fleet000", reservation.id)
+        assert backend.taxi_state("fleet000") != 0
+        while backend.taxi_state("fleet000") != 0:
+            backend.step()
+        backend.park_at("fleet000", "B2C2", 100.0)
+        for _ in range(400):
+            backend.step()
+        assert backend.current_edge("fleet000") == "B2C2"
+        assert backend.lane_position("fleet000") == pytest.approx(100.0, abs=1.0)
+    finally:
+        backend.close()
+
+
+def test_parking_behind_the_vehicle_on_its_own_edge_drives_a_loop(
+    grid_net: Path, tmp_path: Path
+) -> None:
+    backend = _start(grid_net, tmp_path, requests=[])
+    try:
+        backend.step()
+        backend.park_at("fleet000", "B2C2", 20.0)  # behind: it has to come around
+        seen = set()
+        for _ in range(600):
+            backend.step()
+            seen.add(backend.current_edge("fleet000"))
+        assert len(seen) >= 2  # it left the edge (a U-turn at C2 is allowed) and came back
+        assert backend.current_edge("fleet000") == "B2C2"
+        assert backend.lane_position("fleet000") == pytest.approx(20.0, abs=1.0)
+    finally:
+        backend.close()
+
+
+def test_places_of_vehicles_and_travel_times(grid_net: Path, tmp_path: Path) -> None:
+    backend = _start(grid_net, tmp_path, requests=[])
+    try:
+        backend.step()
+        places = backend.vehicle_places()
+        assert [p[0] for p in places] == ["fleet000"]
+        assert places[0][1] == "B2C2"
+        (seconds,) = backend.edge_travel_times(["B2C2"])
+        assert seconds > 0.0
+    finally:
+        backend.close()
+
+
+def test_unknown_backend_and_unstarted_simulation() -> None:
+    with pytest.raises(SimulationError):
+        make_backend("carla")
+    with pytest.raises(SimulationError, match="not been started"):
+        LibsumoBackend().step()

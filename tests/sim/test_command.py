@@ -1,0 +1,50 @@
+"""``routing-svc cosim`` through its argparse entry points."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import pytest
+
+from routing_svc.sim import command
+
+
+def _parse(argv: list[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="routing-svc")
+    command.add_parser(parser.add_subparsers(dest="command", required=True))
+    return parser.parse_args(["cosim", *argv])
+
+
+def test_cosim_command_prints_a_summary_and_writes_plots(
+    grid_net: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    args = _parse(
+        [
+            "--net", str(grid_net), "--vehicles", "3", "--duration", "600", "--warmup", "60",
+            "--drain", "240", "--rate", "60", "--density", "15", "--policies", "sa,sumo-stop",
+            "--seeds", "5", "--workers", "1", "--out", str(out), "--quiet",
+        ]
+    )  # fmt: skip
+    assert args.run(args) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert set(printed["policies"]) == {"sa", "sumo-stop"}
+    assert printed["policies"]["sa"]["served"] >= 1
+    assert json.loads((out / "summary.json").read_text())["policies"].keys() == {"sa", "sumo-stop"}
+    for name in ("waits", "positions", "objective"):
+        assert (out / f"cosim-{name}.png").stat().st_size > 1000
+
+
+def test_cosim_command_rejects_unknown_policies(grid_net: Path, tmp_path: Path) -> None:
+    from routing_svc.errors import InvalidInput
+
+    args = _parse(["--net", str(grid_net), "--policies", "sa,teleport", "--out", str(tmp_path)])
+    with pytest.raises(InvalidInput, match="teleport"):
+        args.run(args)
+
+
+def test_bad_seeds_are_an_argparse_error() -> None:
+    with pytest.raises(SystemExit):
+        _parse(["--seeds", "a,b"])

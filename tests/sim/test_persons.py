@@ -1,0 +1,102 @@
+"""Persons asking for taxi rides, every policy, real SUMO: served, measured by SUMO."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from defusedxml import ElementTree
+
+from routing_svc.sim import CosimResult
+
+SERVICE_POLICIES = ("sa", "sa-cold", "static", "optimum")
+
+
+def _sumo_waits(tripinfo: Path) -> dict[str, tuple[float, str]]:
+    """Each person's ride ``waitingTime`` and vehicle, read straight from SUMO's file."""
+    root = ElementTree.parse(tripinfo).getroot()
+    waits = {}
+    for person in root.iter("personinfo"):
+        ride = person.find("ride")
+        assert ride is not None
+        waits[person.get("id")] = (float(ride.get("waitingTime")), ride.get("vehicle"))
+    return waits
+
+
+def test_every_policy_serves_the_requests(persons_result: CosimResult) -> None:
+    runs = persons_result.by_policy()
+    assert set(runs) == {*SERVICE_POLICIES, "sumo-stop", "sumo-circling"}
+    for name, (run,) in runs.items():
+        assert run.requests >= 8, name
+        assert run.served >= run.requests - 1, name  # at most the last one still waiting
+        assert math.isfinite(run.mean_wait) and run.mean_wait > 0.0, name
+        assert run.failed == 0, name
+        assert run.empty_km > 0.0 and run.driven_km >= run.empty_km, name
+
+
+def test_every_policy_sees_the_same_requests(persons_result: CosimResult) -> None:
+    requested = {run.policy: [t for t, _, _ in run.waits] for run in persons_result.runs}
+    first = next(iter(requested.values()))
+    assert all(times == first for times in requested.values())
+
+
+def test_waits_are_sumos_personinfo(persons_result: CosimResult) -> None:
+    for run in persons_result.runs:
+        from_file = _sumo_waits(Path(run.tripinfo))
+        assert sorted(w for w, _ in from_file.values()) == sorted(w for _, w, _ in run.waits)
+        served = [w for w, vehicle in from_file.values() if vehicle != "NULL"]
+        assert math.isclose(run.mean_wait, sum(served) / len(served), rel_tol=1e-12)
+        fleet = {vehicle for _, vehicle in from_file.values() if vehicle != "NULL"}
+        assert fleet and all(v.startswith("fleet") for v in fleet)
+
+
+def test_service_policies_dispatch_the_chosen_vehicle_unless_busy(
+    persons_result: CosimResult,
+) -> None:
+    for name in SERVICE_POLICIES:
+        (run,) = persons_result.by_policy()[name]
+        assert len(run.predicted) == len(run.waits)
+        fallbacks = sum(1 for _, other in run.predicted if other)
+        assert fallbacks == run.fallbacks <= run.requests
+        assert all(math.isfinite(t) and t >= 0.0 for t, _ in run.predicted)
+
+
+def test_sa_moves_reference_positions_and_frozen_policies_do_not(
+    persons_result: CosimResult,
+) -> None:
+    runs = persons_result.by_policy()
+    for name in ("static", "optimum"):
+        (run,) = runs[name]
+        assert run.snapshots[0][1] == run.snapshots[-1][1], name
+    (cold,) = runs["sa-cold"]
+    assert cold.snapshots[0][1] != cold.snapshots[-1][1]
+    (static,) = runs["static"]
+    assert cold.snapshots[0][1] == static.snapshots[0][1]  # same start
+    (optimum,) = runs["optimum"]
+    best = persons_result.optimum[3]
+    assert best is not None
+    assert len(optimum.snapshots[0][1]) == len(best.positions) == 4
+
+
+def test_objective_curves_against_the_optimum(persons_result: CosimResult) -> None:
+    best = persons_result.optimum[3]
+    assert best is not None and best.expected_cost > 0.0
+    optimum_curve = persons_result.curves[("optimum", 3)]
+    assert all(math.isclose(v, best.expected_cost, rel_tol=1e-9) for _, v in optimum_curve)
+    for name in ("sa", "sa-cold", "static"):
+        curve = persons_result.curves[(name, 3)]
+        assert all(v >= best.expected_cost * (1 - 1e-9) for _, v in curve), name
+    assert "sumo-stop" not in {p for p, _ in persons_result.curves}
+
+
+def test_summary_json_is_written(persons_result: CosimResult, tmp_path: Path) -> None:
+    prepared = persons_result.prepared
+    assert prepared is not None
+    out = prepared.seeds[0].workdir.parent
+    summary = json.loads((out / "summary.json").read_text())
+    assert set(summary["policies"]) == set(persons_result.by_policy())
+    sa = summary["policies"]["sa"]
+    for key in ("mean_wait_s", "served", "empty_km", "fallbacks", "sim_speed"):
+        assert key in sa
+    assert summary["spec"]["mode"] == "persons"
