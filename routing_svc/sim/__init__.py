@@ -16,8 +16,9 @@ Nothing here imports libsumo at import time.
 
 from routing_svc.sim.backend import LibsumoBackend, SimBackend, SimulationError, TraciBackend
 from routing_svc.sim.experiment import CosimResult, CosimSpec, run_cosim
+from routing_svc.sim.measures import PolicyRun
 from routing_svc.sim.policies import POLICIES, Policy, parse_policies
-from routing_svc.sim.run import PolicyJob, PolicyRun, run_policy
+from routing_svc.sim.run import PolicyJob, run_policy
 
 __all__ = [
     "POLICIES",

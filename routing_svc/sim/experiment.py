@@ -25,8 +25,9 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from routing_svc.errors import InvalidInput
+from routing_svc.sim.measures import PolicyRun
 from routing_svc.sim.policies import DEFAULT_POLICIES, POLICIES, Policy, floored_step
-from routing_svc.sim.run import PolicyJob, PolicyRun, process_map, run_saved
+from routing_svc.sim.run import PolicyJob, process_map, run_saved
 from routing_svc.sim.scenario import Optimum
 
 if TYPE_CHECKING:

@@ -18,6 +18,7 @@ background traffic realisation (randomTrips seed ``seed + 1000``).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -88,7 +89,8 @@ def record_incidents(job: IncidentJob) -> list[Request]:
     and reused while the job is unchanged: they are a deterministic function of it.
     """
     saved = job.tripinfo.with_suffix(".incidents.json")
-    key = json.dumps(dataclasses.astuple(job), default=str)
+    digest = hashlib.sha256(job.trips.read_bytes()).hexdigest()
+    key = json.dumps([dataclasses.astuple(job), digest], default=str)
     if saved.is_file():
         data = json.loads(saved.read_text(encoding="utf-8"))
         if data.get("key") == key:

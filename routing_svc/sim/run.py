@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import hashlib
 import json
 import math
 import multiprocessing
@@ -21,7 +22,7 @@ import time
 import uuid
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -29,13 +30,12 @@ from routing_svc.client import FleetClient, HttpFleetClient
 from routing_svc.sim.backend import SimulationError, make_backend
 from routing_svc.sim.dispatcher import FleetDispatcher
 from routing_svc.sim.inputs import FleetVehicle, sumo_options, write_fleet
-from routing_svc.sim.measures import read_tripinfo
+from routing_svc.sim.measures import PolicyRun, read_tripinfo
 from routing_svc.sim.policies import Policy
 
 __all__ = [
     "FLEET_PREFIX",
     "PolicyJob",
-    "PolicyRun",
     "open_client",
     "process_map",
     "run_policy",
@@ -113,7 +113,11 @@ class PolicyJob:
     resume: bool = False
 
     def key(self) -> str:
-        """What determines the run's result, as JSON (for reusing a saved run)."""
+        """What determines the run's result, as JSON (for reusing a saved run).
+
+        It includes the SHA-256 of the network and route files, so a saved run
+        is not reused for other requests or other traffic.
+        """
         data = {
             name: getattr(self, name)
             for name in self.__dataclass_fields__
@@ -121,106 +125,13 @@ class PolicyJob:
         }
         data["policy"] = dataclasses.asdict(self.policy)
         data["vehicles"] = [dataclasses.astuple(v) for v in self.vehicles]
+        data["contents"] = [_digest(path) for path in (self.net, *self.routes)]
         return json.dumps(data, sort_keys=True, default=str)
 
 
-@dataclass(slots=True)
-class PolicyRun:
-    """What one run measured (JSON-ready through :meth:`summary`)."""
-
-    policy: str
-    seed: int
-    requests: int
-    served: int
-    mean_wait: float
-    """Mean SUMO wait (s) of the served requests made after ``measure_from``."""
-    mean_wait_second_half: float
-    """The same over the second half of the request period."""
-    empty_km: float
-    driven_km: float
-    fallbacks: int
-    queued: int
-    failed: int
-    sim_seconds: float
-    wall_seconds: float
-    tripinfo: str
-    traffic_updates: int = 0
-    park_retries: int = 0
-    lost: int = 0
-    """Fleet vehicles that left the simulation before the end (SUMO's tripinfo)."""
-    waits: list[tuple[float, float, bool]] = field(default_factory=list)
-    """``(requested, wait, served)`` of every request, from SUMO's personinfo."""
-    predicted: list[tuple[float, bool]] = field(default_factory=list)
-    """Per request (same order): the service's completion time ``T`` from the chosen
-    reference position (free-flow or live seconds), and whether another vehicle went."""
-    snapshots: list[tuple[float, dict[str, tuple[str, float]]]] = field(default_factory=list)
-    """Reference positions over time (service policies only)."""
-
-    @property
-    def sim_speed(self) -> float:
-        """Simulated seconds per wall-clock second."""
-        return self.sim_seconds / self.wall_seconds if self.wall_seconds > 0 else math.inf
-
-    def to_json(self) -> dict[str, Any]:
-        """Everything, JSON-ready (the inverse of :meth:`from_json`)."""
-        return {
-            **self.summary(),
-            "tripinfo": self.tripinfo,
-            "waits": [list(w) for w in self.waits],
-            "predicted": [list(p) for p in self.predicted],
-            "snapshots": [[t, {k: list(v) for k, v in pos.items()}] for t, pos in self.snapshots],
-        }
-
-    @classmethod
-    def from_json(cls, data: Mapping[str, Any]) -> PolicyRun:
-        """A run saved with :meth:`to_json`."""
-        return cls(
-            policy=str(data["policy"]),
-            seed=int(data["seed"]),
-            requests=int(data["requests"]),
-            served=int(data["served"]),
-            mean_wait=float(data["mean_wait_s"]),
-            mean_wait_second_half=float(data["mean_wait_second_half_s"]),
-            empty_km=float(data["empty_km"]),
-            driven_km=float(data["driven_km"]),
-            fallbacks=int(data["fallbacks"]),
-            queued=int(data["queued"]),
-            failed=int(data["failed"]),
-            sim_seconds=float(data["sim_seconds"]),
-            wall_seconds=float(data["wall_seconds"]),
-            tripinfo=str(data["tripinfo"]),
-            traffic_updates=int(data["traffic_updates"]),
-            park_retries=int(data.get("park_retries", 0)),
-            lost=int(data.get("lost", 0)),
-            waits=[(float(t), float(w), bool(ok)) for t, w, ok in data["waits"]],
-            predicted=[(float(t), bool(other)) for t, other in data["predicted"]],
-            snapshots=[
-                (float(t), {k: (str(v[0]), float(v[1])) for k, v in pos.items()})
-                for t, pos in data["snapshots"]
-            ],
-        )
-
-    def summary(self) -> dict[str, Any]:
-        """The headline numbers (no per-request data)."""
-        return {
-            "policy": self.policy,
-            "seed": self.seed,
-            "requests": self.requests,
-            "served": self.served,
-            "mean_wait_s": self.mean_wait,
-            "mean_wait_second_half_s": self.mean_wait_second_half,
-            "empty_km": self.empty_km,
-            "driven_km": self.driven_km,
-            "fallbacks": self.fallbacks,
-            "queued": self.queued,
-            "failed": self.failed,
-            "traffic_updates": self.traffic_updates,
-            "park_retries": self.park_retries,
-            "lost": self.lost,
-            "sim_seconds": self.sim_seconds,
-            "wall_seconds": self.wall_seconds,
-            "sim_speed": self.sim_speed,
-        }
+def _digest(path: Path) -> str:
+    """SHA-256 of a file's bytes."""
+    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def run_saved(job: PolicyJob) -> PolicyRun:

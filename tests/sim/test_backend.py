@@ -6,11 +6,19 @@ from pathlib import Path
 
 import pytest
 
-from routing_svc.sim.backend import LibsumoBackend, Reservation, SimulationError, make_backend
+from routing_svc.sim.backend import (
+    LibsumoBackend,
+    Reservation,
+    SimBackend,
+    SimulationError,
+    make_backend,
+)
 from routing_svc.sim.inputs import FleetVehicle, Request, sumo_options, write_fleet, write_persons
 
 
-def _start(grid_net: Path, tmp_path: Path, *, requests: list[Request]) -> LibsumoBackend:
+def _start(
+    grid_net: Path, tmp_path: Path, *, requests: list[Request], kind: str = "libsumo"
+) -> SimBackend:
     fleet = write_fleet(
         tmp_path / "fleet.rou.xml",
         [FleetVehicle("fleet000", "B2C2", 100.0)],
@@ -18,7 +26,7 @@ def _start(grid_net: Path, tmp_path: Path, *, requests: list[Request]) -> Libsum
         park=True,
     )
     persons = write_persons(tmp_path / "persons.rou.xml", requests)
-    backend = LibsumoBackend()
+    backend = make_backend(kind)
     backend.start(
         sumo_options(
             net=grid_net,
@@ -32,9 +40,12 @@ def _start(grid_net: Path, tmp_path: Path, *, requests: list[Request]) -> Libsum
     return backend
 
 
-def test_reservation_dispatch_and_return_to_the_reference(grid_net: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("kind", ["libsumo", "traci"])
+def test_reservation_dispatch_and_return_to_the_reference(
+    grid_net: Path, tmp_path: Path, kind: str
+) -> None:
     request = Request("p0", 10.0, "D3D4", 50.0, "E4E5", 100.0)
-    backend = _start(grid_net, tmp_path, requests=[request])
+    backend = _start(grid_net, tmp_path, requests=[request], kind=kind)
     try:
         found: list[Reservation] = []
         while not found:

@@ -6,7 +6,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from routing_svc.sim import CosimResult, CosimSpec, parse_policies, run_cosim
-from routing_svc.sim.run import PolicyRun
+from routing_svc.sim.measures import PolicyRun
 
 
 def _outcome(run: PolicyRun) -> tuple[object, ...]:
