@@ -116,7 +116,9 @@ def plot_positions(
 ) -> Path:
     """The network (demand drawn as edge width), SA positions at start and end, optimum."""
     plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(7, 7))
+    xmin, ymin, xmax, ymax = space.network.bounds
+    height = 8.0 * (ymax - ymin) / max(xmax - xmin, 1.0) + 0.8
+    fig, ax = plt.subplots(figsize=(8.0, min(max(height, 4.0), 9.0)))
     _draw_network(ax, space, demand)
     runs = sorted(result.by_policy().get(policy, []), key=lambda r: r.seed)
     index = space.network.edge_index
@@ -144,7 +146,7 @@ def plot_positions(
         if optimum is not None:
             opt = np.array([space.xy(p) for p in optimum.positions])
             ax.scatter(*opt.T, s=90, marker="*", color="tab:green", label="optimum", zorder=5)
-    ax.set_title(title)
+    ax.set_title(title, fontsize=9)
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
