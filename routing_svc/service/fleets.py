@@ -328,7 +328,6 @@ class FleetService:
             return self._runtime(fleet_id).metrics()
 
     def events(self, fleet_id: str, *, after: int, limit: int) -> list[dict[str, Any]]:
-        self._runtime(fleet_id, fresh=False) if fleet_id in self._cache else None
         return [
             {
                 "seq": e.seq,
