@@ -28,6 +28,7 @@ from routing_svc.store.event_log import (
     Build,
     BuildGroup,
     EventLog,
+    FleetGroup,
     Snapshot,
     open_event_log,
 )
@@ -48,6 +49,7 @@ __all__ = [
     "BuildGroup",
     "EventLog",
     "EventRecord",
+    "FleetGroup",
     "FleetRecord",
     "GroupItem",
     "NetworkRecord",

@@ -21,6 +21,8 @@ Two backends share one schema:
 
 from __future__ import annotations
 
+import sqlite3
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -97,7 +99,7 @@ def _install_sqlite_hooks(engine: Engine, *, busy_timeout_ms: int) -> None:
         cursor = dbapi_connection.cursor()
         try:
             cursor.execute(f"PRAGMA busy_timeout = {int(busy_timeout_ms)}")
-            mode = cursor.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+            mode = _switch_to_wal(cursor, busy_timeout_ms=busy_timeout_ms)
             if str(mode).lower() != "wal":
                 raise StorageError(
                     f"SQLite refused write-ahead logging (journal_mode is {mode!r}); "
@@ -114,6 +116,27 @@ def _install_sqlite_hooks(engine: Engine, *, busy_timeout_ms: int) -> None:
         if mode not in ("IMMEDIATE", "DEFERRED", "EXCLUSIVE"):
             raise StorageError(f"unknown SQLite BEGIN mode {mode!r}")
         connection.exec_driver_sql(f"BEGIN {mode}")
+
+
+def _switch_to_wal(cursor: Any, *, busy_timeout_ms: int) -> str:
+    """Run ``PRAGMA journal_mode = WAL`` and return the journal mode in force.
+
+    Changing the journal mode of a fresh database needs an exclusive lock, and
+    SQLite answers "database is locked" at once, without its busy handler, when
+    another connection is changing it at the same moment. The pragma is retried
+    with a growing pause until the busy timeout is spent.
+    """
+    deadline = time.monotonic() + busy_timeout_ms / 1000.0
+    pause = 0.001
+    while True:
+        try:
+            return str(cursor.execute("PRAGMA journal_mode = WAL").fetchone()[0])
+        except sqlite3.OperationalError as error:
+            locked = "locked" in str(error) or "busy" in str(error)
+            if not locked or time.monotonic() + pause > deadline:
+                raise
+        time.sleep(pause)
+        pause = min(2 * pause, 0.05)
 
 
 def check_durability(connection: Connection) -> None:

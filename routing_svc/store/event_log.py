@@ -22,6 +22,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager, nullcontext
+from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, Self
 
@@ -54,6 +55,7 @@ __all__ = [
     "Build",
     "BuildGroup",
     "EventLog",
+    "FleetGroup",
     "Snapshot",
     "open_event_log",
 ]
@@ -367,80 +369,37 @@ class EventLog:
             A bad argument, or ``build`` returned something other than one
             entry of events or an error per fresh request.
         """
-        q.check_version(expected_version)
-        for key, digest in requests:
-            q.check_key(key, "idempotency key")
-            q.check_key(digest, "request hash")
-        with self._write(f"append to fleet {fleet_id!r}") as conn:
-            version = int(q.lock_fleet(conn, fleet_id).version)
-            if expected_version > version:
-                raise Conflict(
-                    f"fleet {fleet_id!r} is at version {version}; "
-                    f"the caller's cache claims version {expected_version}"
-                )
-            stored: dict[str, list[EventRecord]] = {}
-            first_index: dict[str, int] = {}
-            fresh: list[int] = []
-            repeats: dict[int, int] = {}  # index of a repeated key -> its first occurrence
-            for index, (key, _) in enumerate(requests):
-                if key is None:
-                    fresh.append(index)
-                elif key in first_index:
-                    repeats[index] = first_index[key]
-                else:
-                    first_index[key] = index
-                    prior = q.keyed_batch(conn, fleet_id, key)
-                    if prior:
-                        stored[key] = prior
-                    else:
-                        fresh.append(index)
-            missed = tuple(q.select_events(conn, fleet_id, after=expected_version))
-            built: list[list[NewEvent] | RoutingSvcError] = []
-            if fresh:
-                built = _checked_group(build(list(missed), list(fresh)), len(fresh))
-            now = q.now()
-            rows: list[dict[str, Any]] = []
-            outcome: dict[int, tuple[tuple[EventRecord, ...], RoutingSvcError | None]] = {}
-            for index, entry in zip(fresh, built, strict=True):
-                if isinstance(entry, RoutingSvcError):
-                    outcome[index] = ((), entry)
-                    continue
-                key, digest = requests[index]
-                mine = q.event_rows(
-                    fleet_id,
-                    version + len(rows),
-                    entry,
-                    idempotency_key=key,
-                    request_hash=digest,
-                    created_at=now,
-                )
-                rows += mine
-                outcome[index] = (q.records_of_rows(mine), None)
-            if rows:
-                q.insert_events(conn, fleet_id, rows, snapshot=snapshot)
-        new_version = version + len(rows)
-        items: list[GroupItem] = []
-        for index, (key, digest) in enumerate(requests):
-            first = repeats.get(index, index)
-            duplicate = first != index
-            if key is not None and key in stored:
-                prior_events = stored[key]
-                if prior_events[0].request_hash != digest:
-                    error: RoutingSvcError = Conflict(
-                        f"idempotency key {key!r} was used for another request"
-                    )
-                    items.append(GroupItem(new_version, (), missed, False, error))
-                else:
-                    items.append(GroupItem(new_version, tuple(prior_events), missed, True))
-                continue
-            events_of, failed = outcome[first]
-            if duplicate and requests[first][1] != digest:
-                failed = Conflict(f"idempotency key {key!r} was used for another request")
-            if failed is not None:
-                items.append(GroupItem(new_version, (), missed, False, failed))
-            else:
-                items.append(GroupItem(new_version, events_of, missed, duplicate))
+        (items,) = self.append_groups(
+            [FleetGroup(fleet_id, expected_version, tuple(requests), build, snapshot)]
+        )
         return items
+
+    def append_groups(self, groups: Sequence[FleetGroup]) -> list[list[GroupItem]]:
+        """Commit the groups of several fleets in one transaction.
+
+        Each :class:`FleetGroup` is handled exactly as :meth:`append_group`
+        handles its arguments, in order, inside a single transaction: one
+        commit (one ``fsync`` on SQLite) makes them all durable. If anything
+        raises (an unknown or deleted fleet, a version conflict, a ``build``
+        that raises), nothing of any group is written and the exception
+        propagates; the caller can then retry the groups one by one.
+
+        Returns
+        -------
+        list[list[GroupItem]]
+            Per group, one item per request; returned only after the
+            transaction has committed.
+        """
+        for group in groups:
+            q.check_version(group.expected_version)
+            for key, digest in group.requests:
+                q.check_key(key, "idempotency key")
+                q.check_key(digest, "request hash")
+        if len({group.fleet_id for group in groups}) != len(groups):
+            raise InvalidInput("append_groups takes at most one group per fleet")
+        what = "append to fleets " + ", ".join(repr(g.fleet_id) for g in groups)
+        with self._write(what) as conn:
+            return [_append_in(conn, group) for group in groups]
 
     def events(self, fleet_id: str, *, after: int = 0, limit: int = 1000) -> list[EventRecord]:
         """Return up to ``limit`` events with ``seq > after``, in order (one page).
@@ -549,3 +508,94 @@ def _checked_group(
 def open_event_log(url: str, *, busy_timeout_ms: int = 30_000) -> EventLog:
     """Create an :class:`EventLog` for ``url`` and open it."""
     return EventLog(url, busy_timeout_ms=busy_timeout_ms).open()
+
+
+@dataclass(frozen=True, slots=True)
+class FleetGroup:
+    """The arguments of :meth:`EventLog.append_group` for one fleet."""
+
+    fleet_id: str
+    expected_version: int
+    requests: tuple[tuple[str | None, str | None], ...]
+    build: BuildGroup
+    snapshot: Snapshot | None = None
+
+
+def _append_in(conn: Connection, group: FleetGroup) -> list[GroupItem]:
+    """Write one fleet's group inside the open transaction ``conn``."""
+    fleet_id, expected_version = group.fleet_id, group.expected_version
+    requests, build, snapshot = group.requests, group.build, group.snapshot
+    version = int(q.lock_fleet(conn, fleet_id).version)
+    if expected_version > version:
+        raise Conflict(
+            f"fleet {fleet_id!r} is at version {version}; "
+            f"the caller's cache claims version {expected_version}"
+        )
+    stored: dict[str, list[EventRecord]] = {}
+    first_index: dict[str, int] = {}
+    fresh: list[int] = []
+    repeats: dict[int, int] = {}  # index of a repeated key -> its first occurrence
+    for index, (key, _) in enumerate(requests):
+        if key is None:
+            fresh.append(index)
+        elif key in first_index:
+            repeats[index] = first_index[key]
+        else:
+            first_index[key] = index
+            prior = q.keyed_batch(conn, fleet_id, key)
+            if prior:
+                stored[key] = prior
+            else:
+                fresh.append(index)
+    # the events after the caller's version, if other writers appended any
+    missed = (
+        tuple(q.select_events(conn, fleet_id, after=expected_version))
+        if version > expected_version
+        else ()
+    )
+    built: list[list[NewEvent] | RoutingSvcError] = []
+    if fresh:
+        built = _checked_group(build(list(missed), list(fresh)), len(fresh))
+    now = q.now()
+    rows: list[dict[str, Any]] = []
+    outcome: dict[int, tuple[tuple[EventRecord, ...], RoutingSvcError | None]] = {}
+    for index, entry in zip(fresh, built, strict=True):
+        if isinstance(entry, RoutingSvcError):
+            outcome[index] = ((), entry)
+            continue
+        key, digest = requests[index]
+        mine = q.event_rows(
+            fleet_id,
+            version + len(rows),
+            entry,
+            idempotency_key=key,
+            request_hash=digest,
+            created_at=now,
+        )
+        rows += mine
+        outcome[index] = (q.records_of_rows(mine), None)
+    if rows:
+        q.insert_events(conn, fleet_id, rows, snapshot=snapshot)
+    new_version = version + len(rows)
+    items: list[GroupItem] = []
+    for index, (key, digest) in enumerate(requests):
+        first = repeats.get(index, index)
+        duplicate = first != index
+        if key is not None and key in stored:
+            prior_events = stored[key]
+            if prior_events[0].request_hash != digest:
+                error: RoutingSvcError = Conflict(
+                    f"idempotency key {key!r} was used for another request"
+                )
+                items.append(GroupItem(new_version, (), missed, False, error))
+            else:
+                items.append(GroupItem(new_version, tuple(prior_events), missed, True))
+            continue
+        events_of, failed = outcome[first]
+        if duplicate and requests[first][1] != digest:
+            failed = Conflict(f"idempotency key {key!r} was used for another request")
+        if failed is not None:
+            items.append(GroupItem(new_version, (), missed, False, failed))
+        else:
+            items.append(GroupItem(new_version, events_of, missed, duplicate))
+    return items

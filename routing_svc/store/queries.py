@@ -36,6 +36,23 @@ __all__ = [
 ]
 
 
+# The statements of the write path, built once (their compiled form is cached).
+_FLEET_KEY: sa.BindParameter[str] = sa.bindparam("fleet_key")
+_SELECT_FLEET = sa.select(fleets).where(fleets.c.id == _FLEET_KEY)
+_LOCK_FLEET = _SELECT_FLEET.with_for_update()
+_UPDATE_FLEET = sa.update(fleets).where(fleets.c.id == _FLEET_KEY)
+_INSERT_EVENTS = sa.insert(events)
+_SELECT_EVENTS = (
+    sa.select(events)
+    .where(events.c.fleet_id == _FLEET_KEY, events.c.seq > sa.bindparam("after"))
+    .order_by(events.c.seq)
+)
+_SELECT_EVENTS_PAGE = _SELECT_EVENTS.limit(sa.bindparam("limit"))
+_SELECT_KEY = sa.select(events.c.seq, events.c.batch_size).where(
+    events.c.fleet_id == _FLEET_KEY, events.c.idempotency_key == sa.bindparam("key")
+)
+
+
 def now() -> datetime:
     """The current time, aware, in UTC."""
     return datetime.now(UTC)
@@ -119,7 +136,7 @@ def insert_events(
     ``snapshot(new_version)`` is called after the insert; a string it returns
     is stored as the fleet's state at ``new_version``.
     """
-    conn.execute(sa.insert(events), rows)
+    conn.execute(_INSERT_EVENTS, rows)
     new_version = int(rows[-1]["seq"])
     values: dict[str, Any] = {"version": new_version}
     state = snapshot(new_version) if snapshot is not None else None
@@ -127,7 +144,7 @@ def insert_events(
         if not isinstance(state, str):
             raise InvalidInput("snapshot must return JSON text (str) or None")
         values |= {"state": state, "snapshot_version": new_version}
-    conn.execute(sa.update(fleets).where(fleets.c.id == fleet_id).values(values))
+    conn.execute(_UPDATE_FLEET, {"fleet_key": fleet_id, **values})
 
 
 def select_network(conn: Connection, network_id: str) -> Any:
@@ -137,7 +154,7 @@ def select_network(conn: Connection, network_id: str) -> Any:
 
 def select_fleet(conn: Connection, fleet_id: str) -> Any:
     """The ``fleets`` row of ``fleet_id`` (deleted or not), or ``None``."""
-    return conn.execute(sa.select(fleets).where(fleets.c.id == fleet_id)).one_or_none()
+    return conn.execute(_SELECT_FLEET, {"fleet_key": fleet_id}).one_or_none()
 
 
 def lock_fleet(conn: Connection, fleet_id: str) -> Any:
@@ -151,9 +168,7 @@ def lock_fleet(conn: Connection, fleet_id: str) -> Any:
     UnknownFleet
         No such fleet, or it was deleted.
     """
-    row = conn.execute(
-        sa.select(fleets).where(fleets.c.id == fleet_id).with_for_update()
-    ).one_or_none()
+    row = conn.execute(_LOCK_FLEET, {"fleet_key": fleet_id}).one_or_none()
     if row is None or row.deleted:
         raise UnknownFleet(f"no fleet {fleet_id!r}")
     return row
@@ -163,23 +178,17 @@ def select_events(
     conn: Connection, fleet_id: str, *, after: int, limit: int | None = None
 ) -> list[EventRecord]:
     """The events of ``fleet_id`` with ``seq > after`` in order, at most ``limit``."""
-    query = (
-        sa.select(events)
-        .where(events.c.fleet_id == fleet_id, events.c.seq > after)
-        .order_by(events.c.seq)
-    )
-    if limit is not None:
-        query = query.limit(limit)
-    return [EventRecord.from_row(row) for row in conn.execute(query)]
+    if limit is None:
+        rows = conn.execute(_SELECT_EVENTS, {"fleet_key": fleet_id, "after": after})
+    else:
+        params = {"fleet_key": fleet_id, "after": after, "limit": limit}
+        rows = conn.execute(_SELECT_EVENTS_PAGE, params)
+    return [EventRecord.from_row(row) for row in rows]
 
 
 def keyed_batch(conn: Connection, fleet_id: str, key: str) -> list[EventRecord]:
     """The events written by the append that used idempotency ``key`` (or ``[]``)."""
-    first = conn.execute(
-        sa.select(events.c.seq, events.c.batch_size).where(
-            events.c.fleet_id == fleet_id, events.c.idempotency_key == key
-        )
-    ).one_or_none()
+    first = conn.execute(_SELECT_KEY, {"fleet_key": fleet_id, "key": key}).one_or_none()
     if first is None:
         return []
     query = (

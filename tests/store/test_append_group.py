@@ -5,9 +5,17 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import pytest
+import sqlalchemy as sa
 
-from routing_svc.errors import Conflict, InvalidInput, RoutingSvcError, Unreachable
-from routing_svc.store import EventLog, EventRecord, GroupItem, NewEvent, open_event_log
+from routing_svc.errors import Conflict, InvalidInput, RoutingSvcError, UnknownFleet, Unreachable
+from routing_svc.store import (
+    EventLog,
+    EventRecord,
+    FleetGroup,
+    GroupItem,
+    NewEvent,
+    open_event_log,
+)
 
 SHA = "ab" * 32
 
@@ -154,5 +162,48 @@ def test_group_checks_the_cache_version_and_keys(log: EventLog) -> None:
     with pytest.raises(InvalidInput):
         log.append_group(
             "f", expected_version=1, requests=[("", None)], build=lambda m, f: [[target(1)]]
+        )
+    assert log.get_fleet("f").version == 1
+
+
+def one_each(missed: list[EventRecord], fresh: list[int]) -> list[list[NewEvent] | RoutingSvcError]:
+    return [[target(i)] for i in fresh]
+
+
+def test_groups_of_several_fleets_commit_together(log: EventLog) -> None:
+    log.create_fleet("g", "grid", "{}", "{}")
+    commits: list[int] = []
+    sa.event.listen(log._require(), "commit", lambda conn: commits.append(1))
+    results = log.append_groups(
+        [
+            FleetGroup("f", 1, (("k", "h"), (None, None)), one_each),
+            FleetGroup("g", 1, ((None, None),), one_each),
+        ]
+    )
+    assert len(commits) == 1
+    assert [[e.seq for item in items for e in item.events] for items in results] == [[2, 3], [2]]
+    assert log.get_fleet("f").version == 3
+    assert log.get_fleet("g").version == 2
+    assert [e.idempotency_key for e in log.events_since("f", 1)] == ["k", None]
+
+
+def test_one_failing_fleet_writes_nothing_for_any(log: EventLog) -> None:
+    log.create_fleet("g", "grid", "{}", "{}")
+    log.delete_fleet("g")
+    with pytest.raises(UnknownFleet):
+        log.append_groups(
+            [
+                FleetGroup("f", 1, ((None, None),), one_each),
+                FleetGroup("g", 2, ((None, None),), one_each),
+            ]
+        )
+    assert log.get_fleet("f").version == 1
+    assert log.events_since("f", 1) == []
+
+
+def test_groups_name_each_fleet_once(log: EventLog) -> None:
+    with pytest.raises(InvalidInput, match="one group per fleet"):
+        log.append_groups(
+            [FleetGroup("f", 1, ((None, None),), one_each)] * 2,
         )
     assert log.get_fleet("f").version == 1

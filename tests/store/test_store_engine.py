@@ -152,3 +152,24 @@ def test_concurrent_opens_migrate_once(db_url: str) -> None:
     for thread in threads:
         thread.join()
     assert errors == []
+
+
+def test_concurrent_first_opens_of_fresh_sqlite_files_all_succeed(tmp_path: Path) -> None:
+    # switching a new file to WAL races between openers; none may see "database is locked"
+    errors: list[BaseException] = []
+
+    def opener(url: str) -> None:
+        try:
+            with open_event_log(url) as log:
+                log.list_fleets()
+        except BaseException as error:  # collected and asserted below
+            errors.append(error)
+
+    for attempt in range(30):
+        url = f"sqlite:///{tmp_path / f'fresh-{attempt}.db'}"
+        threads = [threading.Thread(target=opener, args=(url,)) for _ in range(4)]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+    assert errors == []
