@@ -9,8 +9,10 @@ Bad Hersfeld if present, a generated 160x160 grid) and each fleet size (10,
 50, 200 vehicles) it reports the median microseconds per query of
 
 - ``routing_svc``: ``RoadSpace.assign`` (one early-exit Dijkstra from the
-  target on the reverse edge graph, numba-compiled), end to end;
-- ``heapq``: the same early-exit algorithm in plain Python with ``heapq``;
+  target on the reverse graph of end-state classes, i.e. the edges grouped
+  by successor set, numba-compiled), end to end;
+- ``heapq``: the same early-exit algorithm in plain Python with ``heapq``, on
+  the reverse edge graph (no classes);
 - ``networkx``: a full (cutoff-free) ``single_source_dijkstra`` from the
   target on the reverse edge graph, then the cheapest vehicle; networkx has
   no multi-vehicle early exit, so this is how it answers "which vehicle is
@@ -20,9 +22,11 @@ all measured in the same run on the same targets (the searches take turns
 on blocks of 20 targets, so load changes on a shared machine hit them alike),
 and the ratios ``speedup_vs_networkx`` and ``speedup_vs_heapq``. networkx runs
 on a sample of the targets; its ratio compares both on that sample. Every
-query's answer is checked to agree between the three. For the grid it also reports the memory
-of the compiled network. ``--quick`` runs a small version (a 30x30 grid,
-fewer queries) for CI.
+query's answer is checked to agree between the three. For every network it
+reports the number of end-state classes, and for the grid the memory of the
+compiled network (its arrays and end-state classes), of the search's work
+arrays and of the arc records with the space's costs. ``--quick`` runs a small version (a 30x30
+grid, fewer queries) for CI.
 """
 
 from __future__ import annotations
@@ -46,6 +50,7 @@ import numpy as np
 import sumo
 
 from routing_svc.network import CompiledNetwork, RoadSpace, default_cache_dir, load_network
+from routing_svc.network.search import search_arcs
 from routing_svc.sa.space import Requirement
 from routing_svc.types import NetPosition
 
@@ -95,7 +100,10 @@ def compile_apart(path: Path, cache: Path) -> None:
 
 
 class HeapqSearch:
-    """The early-exit reverse Dijkstra of routing_svc, in plain Python (one group, count 1)."""
+    """The early-exit reverse Dijkstra of routing_svc on the edge graph, in plain Python.
+
+    One group, count 1, no end-state classes.
+    """
 
     def __init__(self, space: RoadSpace) -> None:
         net = space.network
@@ -287,6 +295,7 @@ def bench_network(
     memory = {
         "compiled_arrays_bytes": network.nbytes(),
         "search_buffers_bytes": space.search_buffer_bytes(),
+        "search_arcs_bytes": search_arcs(network.end_classes, space.edge_costs).nbytes,
         "rss_delta_after_cached_load_bytes": rss_bytes() - before,
     }
     report: dict[str, Any] = {
@@ -294,6 +303,8 @@ def bench_network(
         "edges": network.n_edges,
         "connections": network.n_connections,
         "junctions": network.n_junctions,
+        "end_state_classes": network.end_classes.n_classes,
+        "class_arcs": int(network.end_classes.arc_edge.shape[0]),
         "usable_edges": network.reduction.usable_edges,
         "dropped_edges": network.reduction.dropped_edges,
         "cached_load_s": round(load_s, 3),

@@ -28,7 +28,12 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from routing_svc.errors import InvalidInput, InvalidNetwork
-from routing_svc.network.layout import csr_from_arcs, hilbert_order
+from routing_svc.network.layout import (
+    EndStateClasses,
+    csr_from_arcs,
+    end_state_classes,
+    hilbert_order,
+)
 from routing_svc.network.projection import GeoProjection
 from routing_svc.network.safe_xml import check_net_xml_file
 
@@ -156,13 +161,24 @@ class CompiledNetwork:
         inside = found < self.arc_keys.shape[0]
         return bool(inside.all() and (self.arc_keys[found[inside]] == keys).all())
 
+    @cached_property
+    def end_classes(self) -> EndStateClasses:
+        """Edges grouped by successor set, the graph the nearest-vehicle search runs on.
+
+        Derived from the successor lists on first use (not stored in the
+        cache); see :func:`routing_svc.network.layout.end_state_classes`.
+        """
+        return end_state_classes(
+            self.fwd_indptr, self.fwd_indices, self.rev_indptr, self.rev_indices
+        )
+
     def arrays(self) -> dict[str, npt.NDArray[Any]]:
-        """The numpy arrays of the network, by field name."""
+        """The numpy arrays of the network, by field name (what the cache stores)."""
         return {name: getattr(self, name) for name in _ARRAY_FIELDS}
 
     def nbytes(self) -> int:
-        """Bytes held by the numpy arrays of the network."""
-        return sum(a.nbytes for a in self.arrays().values())
+        """Bytes held by the numpy arrays of the network, the end-state classes included."""
+        return sum(a.nbytes for a in self.arrays().values()) + self.end_classes.nbytes()
 
 
 _ARRAY_FIELDS = (

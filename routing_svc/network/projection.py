@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from routing_svc.errors import InvalidInput
 
@@ -191,22 +192,55 @@ class GeoProjection:
         northing = np.asarray(y, dtype=np.float64) - self.offset_y
         if self.south:
             northing = northing - _FALSE_NORTHING_SOUTH
-        xi = northing / (_K0 * _RECTIFYING_RADIUS)
-        eta = (easting - _FALSE_EASTING) / (_K0 * _RECTIFYING_RADIUS)
-        angles = _ORDERS[:, None] * xi.reshape(1, -1)
-        hyper = _ORDERS[:, None] * eta.reshape(1, -1)
-        xi_p = xi - (_BETA[:, None] * np.sin(angles) * np.cosh(hyper)).sum(axis=0).reshape(xi.shape)
-        eta_p = eta - (_BETA[:, None] * np.cos(angles) * np.sinh(hyper)).sum(axis=0).reshape(
-            eta.shape
+        shape = np.broadcast_shapes(easting.shape, northing.shape)
+        lon, lat = _inverse_points(
+            np.broadcast_to(easting, shape).ravel(),
+            np.broadcast_to(northing, shape).ravel(),
+            self._central_meridian,
         )
-        tau_p = np.sin(xi_p) / np.sqrt(np.sinh(eta_p) ** 2 + np.cos(xi_p) ** 2)
-        lam = np.arctan2(np.sinh(eta_p), np.cos(xi_p))
-        tau = tau_p.copy()
-        for _ in range(5):
-            sigma = np.sinh(_E * np.arctanh(_E * tau / np.sqrt(1.0 + tau**2)))
-            tau_i = tau * np.sqrt(1.0 + sigma**2) - sigma * np.sqrt(1.0 + tau**2)
-            tau = tau + (tau_p - tau_i) / np.sqrt(1.0 + tau_i**2) * (
-                (1.0 + (1.0 - _E**2) * tau**2) / ((1.0 - _E**2) * np.sqrt(1.0 + tau**2))
-            )
-        lon = np.degrees(lam + self._central_meridian)
-        return (lon + 180.0) % 360.0 - 180.0, np.degrees(np.arctan(tau))
+        return lon.reshape(shape), lat.reshape(shape)
+
+    def point_to_lonlat(self, x: float, y: float) -> tuple[float, float]:
+        """:meth:`to_lonlat` of one point, without arrays (the same arithmetic)."""
+        self._require_supported()
+        northing = y - self.offset_y
+        if self.south:
+            northing -= _FALSE_NORTHING_SOUTH
+        return _inverse_point(x - self.offset_x, northing, self._central_meridian)
+
+
+@njit(cache=True)
+def _inverse_point(easting: float, northing: float, central_meridian: float) -> tuple[float, float]:
+    """Krüger's inverse series (Karney 2011, eqs. 11-15 and 19-21) for one point."""
+    xi = northing / (_K0 * _RECTIFYING_RADIUS)
+    eta = (easting - _FALSE_EASTING) / (_K0 * _RECTIFYING_RADIUS)
+    xi_p = xi
+    eta_p = eta
+    for j in range(6):
+        angle = _ORDERS[j] * xi
+        hyper = _ORDERS[j] * eta
+        xi_p -= _BETA[j] * math.sin(angle) * math.cosh(hyper)
+        eta_p -= _BETA[j] * math.cos(angle) * math.sinh(hyper)
+    tau_p = math.sin(xi_p) / math.sqrt(math.sinh(eta_p) ** 2 + math.cos(xi_p) ** 2)
+    lam = math.atan2(math.sinh(eta_p), math.cos(xi_p))
+    tau = tau_p
+    for _ in range(5):
+        sigma = math.sinh(_E * math.atanh(_E * tau / math.sqrt(1.0 + tau**2)))
+        tau_i = tau * math.sqrt(1.0 + sigma**2) - sigma * math.sqrt(1.0 + tau**2)
+        tau = tau + (tau_p - tau_i) / math.sqrt(1.0 + tau_i**2) * (
+            (1.0 + (1.0 - _E**2) * tau**2) / ((1.0 - _E**2) * math.sqrt(1.0 + tau**2))
+        )
+    lon = math.degrees(lam + central_meridian)
+    return (lon + 180.0) % 360.0 - 180.0, math.degrees(math.atan(tau))
+
+
+@njit(cache=True)
+def _inverse_points(
+    easting: FloatArray, northing: FloatArray, central_meridian: float
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`_inverse_point` of every point."""
+    lon = np.empty(easting.size)
+    lat = np.empty(easting.size)
+    for i in range(easting.size):
+        lon[i], lat[i] = _inverse_point(easting[i], northing[i], central_meridian)
+    return lon, lat

@@ -11,32 +11,74 @@ from a vehicle at ``(e, s)`` to a target at ``(t, s_t)`` is
   end of ``e`` to the target: ``h[e] = min`` over successors ``y`` of ``e`` of
   ``s_t * rate[t]`` if ``y == t`` and ``c[y] + h[y]`` otherwise.
 
-The search computes ``h`` by Dijkstra on the reverse edge graph, seeded with
-``s_t * rate[t]`` at the predecessors of ``t``. Settling edge ``x`` (key
-``h[x]``) prices the vehicles on it; no vehicle on an unsettled edge can cost
-less than the smallest key on the heap, so for a group whose fastest vehicle
-has speed ``v_max`` no unseen vehicle can arrive before ``key / v_max``. The
-search stops as soon as every group has its ``count`` best vehicles and the
-last of them arrives strictly before that bound, so ties break by the lower
-vehicle index exactly as a full search would.
+The search over end-state classes
+---------------------------------
+``h[e]`` depends only on the successor set of ``e``, so edges with the same
+successor set (an *end-state class*, see
+:class:`routing_svc.network.layout.EndStateClasses`) share one value ``H``.
+The search computes ``H`` by Dijkstra on the reverse class graph: settling
+class ``x`` (key ``H[x]``) relaxes, for every edge ``y`` of class ``x``
+(cost ``c[y]``), every class whose edges have ``y`` as a successor. It is
+seeded with ``s_t * rate[t]`` at the classes that have ``t`` as a successor.
+This is exactly Dijkstra on the edge graph with the equal labels merged (the
+same sums, in the same order), so answers, costs and ties are unchanged;
+on a grid from ``netgenerate`` it settles a quarter of the nodes. Turn
+restrictions and one-way streets only make the classes smaller.
 
-Once every group has its vehicles, an edge whose key would exceed that bound
-for every group can no longer matter; such edges are not even put on the
+Early exit
+----------
+Settling class ``x`` prices the vehicles on its edges (except those ahead of
+the target on the target edge, priced up front); no vehicle on an unsettled
+class can cost less than the smallest key on the heap, so for a group whose
+fastest vehicle has speed ``v_max`` no unseen vehicle can arrive before
+``key / v_max``. The search stops as soon as every group has its ``count``
+best vehicles and the last of them arrives strictly before that bound, so
+ties break by the lower vehicle index exactly as a full search would.
+
+Once every group has its vehicles, a class whose key would exceed that bound
+for every group can no longer matter; such classes are not even put on the
 heap.
 
-The predecessor pointers of the same search give the mover's path: ``pred[e]``
-is the edge that follows ``e`` on a shortest path to the target.
+Memory
+------
+The search is bound by memory latency (a query touches a few hundred
+classes scattered over megabytes of arrays), not by arithmetic. So every
+arc is one 16-byte record of its edge's cost, the class it leads to and the
+edge (:func:`search_arcs`: the arcs of a class share a cache line), the heap
+is 4-ary (:mod:`routing_svc.network.heap`), and when a class goes on the
+heap the cache lines that settling it will read are prefetched. On the
+160 x 160 grid this made a query with 50 vehicles about 1.5 times faster
+than reading costs, classes and edges from three arrays.
+
+The mover's path
+----------------
+``pred[x]`` is the edge that a vehicle at the end of an edge of class ``x``
+takes next on a shortest path, so the mover's edge path is its own edge
+``e``, then ``pred[class(e)]``, ``pred[class(pred[class(e)])]``, ... up to
+the target edge.
 """
 
 from __future__ import annotations
 
+import weakref
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
-from numba import njit
+from llvmlite import binding as llvm_binding
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
+from routing_svc.network.costs import EdgeCosts, position_columns
 from routing_svc.network.heap import heap_pop, heap_push
+from routing_svc.network.layout import EndStateClasses
+from routing_svc.types import NetPosition
 
 __all__ = [
+    "ARC_DTYPE",
     "STATUS_BAD_COUNTS",
     "STATUS_BAD_GROUP",
     "STATUS_BAD_POSITION",
@@ -45,7 +87,9 @@ __all__ = [
     "STATUS_UNMET",
     "STATUS_UNREACHABLE",
     "SearchBuffers",
+    "fleet_columns",
     "nearest_vehicles",
+    "search_arcs",
 ]
 
 STATUS_OK = 0
@@ -57,7 +101,105 @@ STATUS_BAD_GROUP = 5
 STATUS_BAD_COUNTS = 6
 
 Int32Array = npt.NDArray[np.int32]
+Int64Array = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
+
+
+_PREFETCH = "llvm.prefetch.p0" if llvm_binding.llvm_version_info >= (15,) else "llvm.prefetch.p0i8"
+
+
+def _prefetch_typing(typingctx: Any, array: Any, index: Any) -> Any:
+    """``_prefetch(array, index)``: ask the CPU to fetch the cache line of ``array[index]``.
+
+    A hint, with no effect on results. ``index`` must lie inside the array
+    (the address is computed without a check, although a prefetch never faults).
+    """
+    if not isinstance(array, types.Array) or not isinstance(index, types.Integer):
+        return None
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        array_type = signature.args[0]
+        data = context.make_array(array_type)(context, builder, args[0])
+        pointer = cgutils.get_item_pointer(  # type: ignore[no-untyped-call]
+            context, builder, array_type, data, [args[1]], wraparound=False
+        )
+        byte_pointer = ir.IntType(8).as_pointer()
+        i32 = ir.IntType(32)
+        function = cgutils.get_or_insert_function(  # type: ignore[no-untyped-call]
+            builder.module, ir.FunctionType(ir.VoidType(), [byte_pointer, i32, i32, i32]), _PREFETCH
+        )
+        # read access, high temporal locality, data cache
+        builder.call(function, [builder.bitcast(pointer, byte_pointer), i32(0), i32(3), i32(1)])
+        return context.get_dummy_value()
+
+    return types.void(array, index), codegen
+
+
+_prefetch: Any = intrinsic(_prefetch_typing)
+
+ARC_DTYPE = np.dtype([("cost", np.float64), ("cls", np.int32), ("edge", np.int32)], align=True)
+"""One arc of the reverse class graph: ``edge`` (an edge of the class the arc
+leaves), its ``cost``, and ``cls``, the class whose edges have ``edge`` as a
+successor. 16 bytes, so the four arcs of a grid junction fill one cache line."""
+
+ArcArray = npt.NDArray[np.void]
+
+_SEARCH_ARCS: weakref.WeakKeyDictionary[EdgeCosts, tuple[EndStateClasses, ArcArray]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+def search_arcs(classes: EndStateClasses, costs: EdgeCosts) -> ArcArray:
+    """The arcs of the reverse class graph with the costs of one space, as records.
+
+    Parameters
+    ----------
+    classes : EndStateClasses
+        The network's end-state classes.
+    costs : EdgeCosts
+        The space's edge costs.
+
+    Returns
+    -------
+    ArcArray
+        ``ARC_DTYPE`` records in the order of ``classes.arc_edge`` (read-only):
+        ``cost = costs.cost[arc_edge]``, ``cls = arc_class``, ``edge = arc_edge``.
+        Kept as long as ``costs`` lives, so a space builds it once.
+    """
+    cached = _SEARCH_ARCS.get(costs)
+    if cached is not None and cached[0] is classes:
+        return cached[1]
+    arcs = np.empty(classes.arc_edge.shape[0], dtype=ARC_DTYPE)
+    arcs["cost"] = costs.cost[classes.arc_edge]
+    arcs["cls"] = classes.arc_class
+    arcs["edge"] = classes.arc_edge
+    arcs.flags.writeable = False
+    _SEARCH_ARCS[costs] = (classes, arcs)
+    return arcs
+
+
+def fleet_columns(positions: Sequence[NetPosition]) -> tuple[Int64Array, FloatArray]:
+    """Edge indices and offsets of vehicle positions as arrays, not yet checked against a network.
+
+    The common case (every edge index a plain ``int``) is converted directly;
+    anything else goes through :func:`routing_svc.network.costs.position_columns`,
+    which accepts and rejects exactly the same inputs.
+
+    Raises
+    ------
+    InvalidInput
+        If a position is not a pair of an integer edge index and a number.
+    """
+    n = len(positions)
+    if n:
+        try:
+            raw_edges, raw_offsets = zip(*positions, strict=True)
+            if set(map(type, raw_edges)) == {int}:
+                offsets = np.fromiter(raw_offsets, dtype=np.float64, count=n)
+                return np.fromiter(raw_edges, dtype=np.int64, count=n), offsets
+        except (TypeError, ValueError, OverflowError):
+            pass
+    return position_columns(positions, what="vehicle")
 
 
 class SearchBuffers:
@@ -65,8 +207,8 @@ class SearchBuffers:
 
     Parameters
     ----------
-    n_edges : int
-        Number of graph nodes.
+    n_nodes : int
+        Number of graph nodes (end-state classes).
     n_arcs : int
         Number of graph arcs.
 
@@ -77,13 +219,13 @@ class SearchBuffers:
     sharing one buffer set run one after another and do not disturb each other.
     """
 
-    def __init__(self, n_edges: int, n_arcs: int) -> None:
-        self.dist = np.full(n_edges, np.inf)
-        self.pred = np.full(n_edges, -1, dtype=np.int32)
-        self.touched = np.empty(n_edges, dtype=np.int32)
-        self.heap_key = np.empty(n_arcs + n_edges + 1)
-        self.heap_node = np.empty(n_arcs + n_edges + 1, dtype=np.int32)
-        self.head = np.full(n_edges, -1, dtype=np.int32)
+    def __init__(self, n_nodes: int, n_arcs: int) -> None:
+        self.dist = np.full(n_nodes, np.inf)
+        self.pred = np.full(n_nodes, -1, dtype=np.int32)
+        self.touched = np.empty(n_nodes, dtype=np.int32)
+        self.heap_key = np.empty(n_arcs + n_nodes + 1)
+        self.heap_node = np.empty(n_arcs + n_nodes + 1, dtype=np.int32)
+        self.head = np.full(n_nodes, -1, dtype=np.int32)
         self.next = np.empty(0, dtype=np.int32)
 
     def nbytes(self) -> int:
@@ -230,36 +372,58 @@ def _check_fleet(
     return STATUS_OK, 0
 
 
+@njit(cache=True, inline="always")
+def _prefetch_node(
+    arc_indptr: Int32Array,
+    arcs: ArcArray,
+    head: Int32Array,
+    node: int,
+) -> None:
+    """Start loading what settling ``node`` will read, as it goes on the heap.
+
+    By the time ``node`` is popped its vehicle list head and its arcs are in
+    the cache; without this, each settle waits for two or three cache misses
+    in a row (the search is bound by memory latency, not by arithmetic).
+    """
+    _prefetch(head, node)
+    first = arc_indptr[node]
+    if first < arcs.shape[0]:
+        _prefetch(arcs, first)
+
+
 @njit(cache=True)
-def _route(pred: Int32Array, start: int, target_edge: int, ahead: bool) -> npt.NDArray[np.int64]:
+def _route(
+    pred: Int32Array, edge_class: Int32Array, start: int, target_edge: int, ahead: bool
+) -> npt.NDArray[np.int64]:
     """Edge path from ``start`` to ``target_edge`` along the predecessor pointers.
 
-    ``ahead``: the vehicle is on the target edge behind the target, so the
-    path is that edge alone.
+    ``pred[c]`` is the edge a vehicle at the end of an edge of class ``c``
+    takes next. ``ahead``: the vehicle is on the target edge behind the
+    target, so the path is that edge alone.
     """
     if start == target_edge and ahead:
         return np.full(1, start, dtype=np.int64)
     length = 2
-    cur = pred[start]
-    while cur != target_edge and cur >= 0 and length <= pred.shape[0]:
+    cur = pred[edge_class[start]]
+    while cur != target_edge and cur >= 0 and length <= edge_class.shape[0] + 1:
         length += 1
-        cur = pred[cur]
+        cur = pred[edge_class[cur]]
     route = np.empty(length, dtype=np.int64)
     route[0] = start
-    cur = pred[start]
+    cur = pred[edge_class[start]]
     for j in range(1, length - 1):
         route[j] = cur
-        cur = pred[cur]
+        cur = pred[edge_class[cur]]
     route[length - 1] = target_edge
     return route
 
 
 @njit(cache=True)
 def nearest_vehicles(
-    rev_indptr: Int32Array,
-    rev_indices: Int32Array,
+    arc_indptr: Int32Array,
+    arcs: ArcArray,
+    edge_class: Int32Array,
     length: FloatArray,
-    cost: FloatArray,
     rate: FloatArray,
     target_edge: int,
     target_offset: float,
@@ -275,24 +439,34 @@ def nearest_vehicles(
     heap_node: Int32Array,
     head: Int32Array,
     nxt: Int32Array,
-    best_time: FloatArray,
-    best_cost: FloatArray,
-    best_idx: Int32Array,
-    best_copy: Int32Array,
     n_vehicles: int,
-) -> tuple[int, int, int, npt.NDArray[np.int64]]:
+    cutoff: float,
+) -> tuple[int, int, int, npt.NDArray[np.int64], FloatArray, FloatArray, Int32Array]:
     """Find the ``counts[g]`` fastest vehicles of every group ``g`` for one target.
 
-    Returns ``(status, detail, mover_slot, route)``: on ``STATUS_OK`` the best
-    lists (slots of group ``g`` start at ``sum(counts[:g])``, fastest first)
-    are filled, ``mover_slot`` is the slot of the vehicle that arrives last,
-    and ``route`` holds its edge path to the target. Otherwise ``detail``
-    names the offending vehicle or group. Work arrays are left clean.
+    The graph is the reverse end-state class graph
+    (:class:`routing_svc.network.layout.EndStateClasses`): ``arc_indptr``
+    and ``edge_class``, with the arcs as records that carry the space's
+    costs (:func:`search_arcs`). The work arrays ``dist``,
+    ``pred`` and ``head`` have one entry per class.
+
+    Returns ``(status, detail, mover_slot, route, best_time, best_cost,
+    best_idx)``: on ``STATUS_OK`` the best lists (slots of group ``g`` start
+    at ``sum(counts[:g])``, fastest first) hold every served vehicle's time,
+    cost and index, ``mover_slot`` is the slot of the vehicle that arrives
+    last, and ``route`` holds its edge path to the target. Otherwise
+    ``detail`` names the offending vehicle or group. Work arrays are left
+    clean.
 
     Entries ``i >= n_vehicles`` of the vehicle arrays are other ways for
     vehicle ``i - n_vehicles`` to leave (its twin on the reverse edge, or
-    edge ``-1`` for none); a vehicle counts once, with its cheaper entry, and
-    ``best_copy`` says which entry that was (the route starts there).
+    edge ``-1`` for none); a vehicle counts once, with its cheaper entry,
+    and its route starts at that entry's edge.
+
+    A finite ``cutoff`` (a time) ends the search once no unseen vehicle can
+    arrive before it: the best lists then hold what was found (``inf`` and
+    ``-1`` in slots left empty, a found vehicle may also arrive later than
+    the cutoff), the status is ``STATUS_OK`` and there is no mover or route.
     """
     n_groups = counts.shape[0]
     n_veh = veh_edge.shape[0]
@@ -302,26 +476,22 @@ def nearest_vehicles(
         length, veh_edge, veh_offset, veh_speed, veh_group, counts, vmax, available, n_vehicles
     )
     if status != STATUS_OK:
-        return status, detail, -1, np.empty(0, dtype=np.int64)
+        empty = np.empty(0)
+        return status, detail, -1, np.empty(0, dtype=np.int64), empty, empty, np.empty(0, np.int32)
     slot_start = np.zeros(n_groups + 1, dtype=np.int32)
     for g in range(n_groups):
         slot_start[g + 1] = slot_start[g] + counts[g]
     filled = np.zeros(n_groups, dtype=np.int32)
-    for j in range(best_time.shape[0]):
-        best_time[j] = np.inf
-        best_idx[j] = -1
+    total = slot_start[n_groups]
+    best_time = np.full(total, np.inf)
+    best_cost = np.empty(total)
+    best_idx = np.full(total, -1, dtype=np.int32)
+    best_copy = np.empty(total, dtype=np.int32)
 
-    for i in range(n_veh - 1, -1, -1):
-        e = veh_edge[i]
-        if veh_group[i] >= 0 and e >= 0:
-            nxt[i] = head[e]
-            head[e] = i
     t_rate = rate[target_edge]
-    i = head[target_edge]
-    while i >= 0:
-        if veh_offset[i] <= target_offset:
+    for i in range(n_veh):
+        if veh_edge[i] == target_edge and veh_offset[i] <= target_offset and veh_group[i] >= 0:
             c = (target_offset - veh_offset[i]) * t_rate
-            g = veh_group[i]
             _offer(
                 slot_start,
                 counts,
@@ -330,26 +500,36 @@ def nearest_vehicles(
                 best_cost,
                 best_idx,
                 best_copy,
-                g,
+                veh_group[i],
                 c / veh_speed[i],
                 c,
                 i % n_vehicles,
                 i,
             )
-        i = nxt[i]
-    prune = _prune_key(slot_start, counts, filled, best_time, vmax)
+    for i in range(n_veh - 1, -1, -1):
+        e = veh_edge[i]
+        if veh_group[i] >= 0 and e >= 0 and (e != target_edge or veh_offset[i] > target_offset):
+            x = edge_class[e]
+            nxt[i] = head[x]
+            head[x] = i
+    reach = cutoff * vmax.max() if n_groups > 0 else np.inf  # no cost beyond it matters
+    prune = min(_prune_key(slot_start, counts, filled, best_time, vmax), reach)
 
     n_touched = 0
     size = 0
     seed = target_offset * t_rate
-    for k in range(rev_indptr[target_edge], rev_indptr[target_edge + 1]):
-        p = rev_indices[k]
-        if seed < dist[p] and seed <= prune:
+    t_class = edge_class[target_edge]
+    if seed <= prune:
+        for a in range(arc_indptr[t_class], arc_indptr[t_class + 1]):
+            if arcs[a].edge != target_edge:
+                continue
+            p = arcs[a].cls
             if dist[p] == np.inf:
                 touched[n_touched] = p
                 n_touched += 1
             dist[p] = seed
             pred[p] = target_edge
+            _prefetch_node(arc_indptr, arcs, head, p)
             size = heap_push(heap_key, heap_node, size, seed, p)
 
     while size > 0:
@@ -358,6 +538,8 @@ def nearest_vehicles(
         size = heap_pop(heap_key, heap_node, size)
         if key > dist[x]:
             continue
+        if key >= reach:
+            break
         done = True
         for g in range(n_groups):
             k = counts[g]
@@ -367,52 +549,50 @@ def nearest_vehicles(
         if done:
             break
         i = head[x]
-        if i >= 0:
-            x_rate = rate[x]
-            x_len = length[x]
         while i >= 0:
-            if x != target_edge or veh_offset[i] > target_offset:
-                c = key + (x_len - veh_offset[i]) * x_rate
-                g = veh_group[i]
-                _offer(
-                    slot_start,
-                    counts,
-                    filled,
-                    best_time,
-                    best_cost,
-                    best_idx,
-                    best_copy,
-                    g,
-                    c / veh_speed[i],
-                    c,
-                    i % n_vehicles,
-                    i,
-                )
+            e = veh_edge[i]
+            c = key + (length[e] - veh_offset[i]) * rate[e]
+            _offer(
+                slot_start,
+                counts,
+                filled,
+                best_time,
+                best_cost,
+                best_idx,
+                best_copy,
+                veh_group[i],
+                c / veh_speed[i],
+                c,
+                i % n_vehicles,
+                i,
+            )
             i = nxt[i]
             if i < 0:
-                prune = _prune_key(slot_start, counts, filled, best_time, vmax)
-        through = key + cost[x]
-        if through > prune:
-            continue
-        for k in range(rev_indptr[x], rev_indptr[x + 1]):
-            p = rev_indices[k]
+                prune = min(_prune_key(slot_start, counts, filled, best_time, vmax), reach)
+        for a in range(arc_indptr[x], arc_indptr[x + 1]):
+            arc = arcs[a]
+            through = key + arc.cost
+            if through > prune:
+                continue
+            p = arc.cls
             if through < dist[p]:
                 if dist[p] == np.inf:
                     touched[n_touched] = p
                     n_touched += 1
                 dist[p] = through
-                pred[p] = x
+                pred[p] = arc.edge
+                _prefetch_node(arc_indptr, arcs, head, p)
                 size = heap_push(heap_key, heap_node, size, through, p)
 
     status = STATUS_OK
     for g in range(n_groups):
-        if filled[g] < counts[g]:
+        if filled[g] < counts[g] and cutoff == np.inf:
             status = STATUS_UNREACHABLE
             detail = g
             break
     mover_slot = -1
     route = np.empty(0, dtype=np.int64)
-    if status == STATUS_OK and best_time.shape[0] > 0:
+    if status == STATUS_OK and best_time.shape[0] > 0 and cutoff == np.inf:
         mover_slot = 0
         for j in range(1, best_time.shape[0]):
             m = mover_slot
@@ -421,12 +601,14 @@ def nearest_vehicles(
             ):
                 mover_slot = j
         mover = best_copy[mover_slot]
-        route = _route(pred, veh_edge[mover], target_edge, veh_offset[mover] <= target_offset)
+        route = _route(
+            pred, edge_class, veh_edge[mover], target_edge, veh_offset[mover] <= target_offset
+        )
 
     for j in range(n_touched):
         dist[touched[j]] = np.inf
         pred[touched[j]] = -1
     for i in range(n_veh):
         if veh_edge[i] >= 0:
-            head[veh_edge[i]] = -1
-    return status, detail, mover_slot, route
+            head[edge_class[veh_edge[i]]] = -1
+    return status, detail, mover_slot, route, best_time, best_cost, best_idx

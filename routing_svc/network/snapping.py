@@ -14,6 +14,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 import shapely
+from numba import njit
 
 from routing_svc.errors import InvalidInput, OffNetwork
 from routing_svc.network.compile import CompiledNetwork
@@ -36,13 +37,35 @@ def point_on_edge(network: CompiledNetwork, edge: int, offset: float) -> tuple[f
     offset : float
         Offset in metres, ``0 <= offset <= length[edge]``.
     """
-    points = network.shape_xy[network.shape_offsets[edge] : network.shape_offsets[edge + 1]]
-    along = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))))
-    distance = offset * along[-1] / network.length[edge]
-    return (
-        float(np.interp(distance, along, points[:, 0])),
-        float(np.interp(distance, along, points[:, 1])),
+    return _point_on_shape(
+        network.shape_xy,
+        int(network.shape_offsets[edge]),
+        int(network.shape_offsets[edge + 1]),
+        float(network.length[edge]),
+        float(offset),
     )
+
+
+@njit(cache=True)
+def _point_on_shape(
+    points: FloatArray, first: int, end: int, length: float, offset: float
+) -> tuple[float, float]:
+    """The point at ``offset * G / length`` along the polyline ``points[first:end]`` of
+    geometric length ``G`` (linear interpolation on the segment that holds it)."""
+    total = 0.0
+    for i in range(first, end - 1):
+        total += math.hypot(points[i + 1, 0] - points[i, 0], points[i + 1, 1] - points[i, 1])
+    distance = offset * total / length
+    walked = 0.0
+    for i in range(first, end - 1):
+        dx = points[i + 1, 0] - points[i, 0]
+        dy = points[i + 1, 1] - points[i, 1]
+        segment = math.hypot(dx, dy)
+        if segment > 0.0 and walked + segment >= distance:
+            share = max(0.0, distance - walked) / segment
+            return points[i, 0] + share * dx, points[i, 1] + share * dy
+        walked += segment
+    return points[end - 1, 0], points[end - 1, 1]
 
 
 def _coordinate_arrays(

@@ -22,7 +22,6 @@ from routing_svc.network.costs import (
     EdgeCosts,
     check_position,
     cost_matrix,
-    position_columns,
 )
 from routing_svc.network.search import (
     STATUS_BAD_COUNTS,
@@ -31,16 +30,20 @@ from routing_svc.network.search import (
     STATUS_BAD_SPEED,
     STATUS_UNMET,
     STATUS_UNREACHABLE,
+    Int32Array,
     SearchBuffers,
+    fleet_columns,
     nearest_vehicles,
+    search_arcs,
 )
 from routing_svc.network.snapping import point_on_edge
-from routing_svc.network.twins import twin, twin_columns
+from routing_svc.network.twins import reverse_edges, twin, twin_columns
 from routing_svc.network.walking import check_route, random_walk, walk_route
 from routing_svc.sa.space import Assignment, FloatArray, IntArray, Requirement
 from routing_svc.types import NetPosition
 
 __all__ = ["RoadSpace"]
+
 
 _TYPICAL_SEED = 0
 _TYPICAL_SOURCES = 32
@@ -60,7 +63,8 @@ class _SharedBuffers:
 
     def get(self) -> SearchBuffers:
         if self._buffers is None:
-            self._buffers = SearchBuffers(self._network.n_edges, self._network.n_connections)
+            classes = self._network.end_classes
+            self._buffers = SearchBuffers(classes.n_classes, classes.arc_edge.shape[0])
         return self._buffers
 
 
@@ -147,7 +151,8 @@ class RoadSpace:
     ) -> Assignment[NetPosition]:
         """Find the fastest vehicles of every requirement group with one search.
 
-        Runs one early-exit Dijkstra from ``target`` on the reverse edge graph
+        Runs one early-exit Dijkstra from ``target`` on the reverse graph of
+        end-state classes, the edges grouped by successor set
         (:func:`routing_svc.network.search.nearest_vehicles`). Vehicle ``i``
         arrives after ``cost_i / speeds[i]``; ties break by the lower index.
         The route of the result is the mover's edge path (an array of edge
@@ -162,9 +167,31 @@ class RoadSpace:
         Unreachable
             If a group has too few vehicles that can reach the target.
         """
+        _, _, mover_slot, route, best_time, best_cost, best_idx = self._search(
+            target, positions, speeds, requirement, np.inf
+        )
+        route.flags.writeable = False
+        return Assignment(
+            served_by=tuple(best_idx.tolist()),
+            times=tuple(best_time.tolist()),
+            mover=int(best_idx[mover_slot]),
+            completion_time=float(best_time[mover_slot]),
+            mover_cost=float(best_cost[mover_slot]),
+            route=route,
+        )
+
+    def _search(
+        self,
+        target: NetPosition,
+        positions: list[NetPosition],
+        speeds: FloatArray,
+        requirement: Requirement,
+        cutoff: float,
+    ) -> tuple[int, int, int, IntArray, FloatArray, FloatArray, Int32Array]:
+        """Run :func:`~routing_svc.network.search.nearest_vehicles`; raise its errors."""
         net = self.network
         check_position(net, target, what="target")
-        edges, offsets = position_columns(positions, what="vehicle")
+        edges, offsets = fleet_columns(positions)
         speed = np.ascontiguousarray(speeds, dtype=np.float64)
         groups, counts = _requirement_arrays(requirement, len(positions))
         if speed.shape != (len(positions),):
@@ -177,17 +204,15 @@ class RoadSpace:
             speed = np.concatenate([speed, speed])
             groups = np.concatenate([groups, groups])
         buffers = self._buffers.get()
-        total = max(int(counts.sum()), 0)  # negative counts are rejected by the search
-        best_time, best_cost = np.empty(total), np.empty(total)
-        best_idx = np.empty(total, dtype=np.int32)
-        best_copy = np.empty(total, dtype=np.int32)
-        status, detail, mover_slot, route = nearest_vehicles(
-            net.rev_indptr, net.rev_indices, net.length, self._costs.cost, self._costs.rate,
+        classes = net.end_classes
+        found = nearest_vehicles(
+            classes.arc_indptr, search_arcs(classes, self._costs), classes.edge_class,
+            net.length, self._costs.rate,
             target.edge, float(target.offset), edges, offsets, speed, groups, counts,
             buffers.dist, buffers.pred, buffers.touched, buffers.heap_key, buffers.heap_node,
-            buffers.head, buffers.vehicle_links(edges.shape[0]), best_time, best_cost, best_idx,
-            best_copy, max(n, 1),
+            buffers.head, buffers.vehicle_links(edges.shape[0]), max(n, 1), cutoff,
         )  # fmt: skip
+        status, detail = found[0], found[1]
         if status == STATUS_BAD_POSITION:
             check_position(net, positions[detail], what=f"vehicle {detail}")
         if status == STATUS_BAD_GROUP:
@@ -205,15 +230,25 @@ class RoadSpace:
             raise Unreachable(
                 f"fewer than {counts[detail]} vehicle(s) of group {detail} can reach the target"
             )
-        route.flags.writeable = False
-        return Assignment(
-            served_by=tuple(best_idx.tolist()),
-            times=tuple(best_time.tolist()),
-            mover=int(best_idx[mover_slot]),
-            completion_time=float(best_time[mover_slot]),
-            mover_cost=float(best_cost[mover_slot]),
-            route=route,
-        )
+        return found
+
+    def arrival_times(
+        self, target: NetPosition, positions: list[NetPosition], speeds: FloatArray, cutoff: float
+    ) -> FloatArray:
+        """Each vehicle's travel time to ``target`` if it is below ``cutoff``, else ``inf``.
+
+        One search (each vehicle its own group) that stops once no unseen
+        vehicle can arrive before ``cutoff``, so its work grows with the cutoff,
+        not with the fleet: what :meth:`Fleet._probe` needs.
+        """
+        n = len(positions)
+        every = Requirement(np.arange(n, dtype=np.int64), np.ones(n, dtype=np.int64))
+        found = self._search(target, positions, speeds, every, cutoff)
+        best_time, best_idx = found[4], found[6]
+        times = np.full(n, np.inf)
+        hit = (best_idx >= 0) & (best_time < cutoff)
+        times[best_idx[hit]] = best_time[hit]
+        return times
 
     def path_cost(self, a: NetPosition, b: NetPosition) -> float:
         """Directed cost from position ``a`` to position ``b``.
@@ -273,6 +308,95 @@ class RoadSpace:
                 position = other
         edges = check_route(self.network, position, target, route)
         return walk_route(self.network, self._costs, position, target, edges, amount)
+
+    def back_probes(
+        self,
+        positions: list[NetPosition],
+        window: float,
+        entries: list[NetPosition | None],
+    ) -> list[NetPosition]:
+        """Per reference, the point a cost ``window`` behind it, or where it entered its edge.
+
+        On its own edge when the offset allows; else its entry, the end of the
+        edge the reference came from (that junction, with that edge's turns);
+        else (entry unknown) the start of its edge.
+        """
+        edges, offsets = fleet_columns(positions)
+        if not _on_network(self.network, edges, offsets):
+            for position in positions:
+                check_position(self.network, position, what="position")
+        rate = self._costs.rate[edges]
+        behind = (offsets - window / rate).tolist()
+        room = (offsets * rate > window).tolist()
+        probes: list[NetPosition] = []
+        for i, edge in enumerate(edges.tolist()):
+            entry = entries[i]
+            if room[i]:
+                probes.append(NetPosition(edge, behind[i]))
+            else:
+                probes.append(entry if entry is not None else NetPosition(edge, 0.0))
+        return probes
+
+    def back_off(self, position: NetPosition, probe: NetPosition, amount: float) -> NetPosition:
+        """Move ``position`` a cost ``amount`` back toward its probe, not past it."""
+        rate = float(self._costs.rate[position.edge])
+        if probe.edge == position.edge:
+            return NetPosition(position.edge, max(probe.offset, position.offset - amount / rate))
+        if amount >= position.offset * rate:
+            return probe
+        return NetPosition(position.edge, position.offset - amount / rate)
+
+    def entry(
+        self,
+        old: NetPosition,
+        new: NetPosition,
+        route: object,
+        previous: NetPosition | None,
+        window: float,
+    ) -> NetPosition | None:
+        """The junction behind ``new`` whose other turns the reference gave up.
+
+        For a reference moved from ``old`` to ``new`` along ``route`` (``None``
+        for a move without one), with ``previous`` the entry of ``old``. An
+        entry is the end of an edge where the reference had a choice
+        (:meth:`_branches`; ends of edges with a single turn reach exactly what
+        the start of the next edge reaches, so they are skipped): the farthest
+        such junction within a cost ``window`` behind ``new`` along the route,
+        or ``previous`` when still within it, else the nearest one behind.
+
+        ``previous`` is kept when the reference stayed on its edge (moved forward
+        on it, or back without a route). ``None`` means unknown: it left from
+        the twin of ``old`` and stayed on that edge, or it moved to another edge
+        without a route (backed off onto its entry, or perturbed by annealing).
+        """
+        if new.edge == old.edge and new.offset >= old.offset:
+            return previous
+        path = route.tolist() if isinstance(route, np.ndarray) else []
+        k = next((k for k in range(len(path) - 1, 0, -1) if path[k] == new.edge), 0)
+        if k == 0:
+            return previous if new.edge == old.edge else None
+        net, costs = self.network, self._costs
+        behind = new.offset * float(costs.rate[new.edge])
+        best: NetPosition | None = None
+        for edge in reversed(path[:k]):
+            if self._branches(edge) and (best is None or behind <= window):
+                best = NetPosition(edge, float(net.length[edge]))
+            if behind > window and best is not None:
+                return best
+            behind += float(costs.cost[edge])
+        if previous is not None:
+            try:
+                if self.path_cost(previous, new) <= window or best is None:
+                    return previous
+            except Unreachable:
+                pass
+        return best
+
+    def _branches(self, edge: int) -> bool:
+        """Whether a reference at the end of ``edge`` has a choice: two turns, or its twin."""
+        net = self.network
+        turns = int(net.fwd_indptr[edge + 1]) - int(net.fwd_indptr[edge])
+        return turns > 1 or (self.either_way and int(reverse_edges(net)[edge]) >= 0)
 
     def perturb(
         self, position: NetPosition, amount: float, rng: np.random.Generator

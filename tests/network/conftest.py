@@ -1,11 +1,15 @@
-"""Networks for the road-network tests: a real OSM district and a generated one-way net.
+"""Networks for the road-network tests: a real OSM district and generated nets.
 
 - ``drt``: ``<SUMO_HOME>/tools/game/DRT/osm.net.xml`` from the eclipse-sumo
   package (Berlin, converted from OpenStreetMap, with a UTM projection);
 - ``oneway``: generated here with ``netgenerate --rand`` where only 60 % of
   the roads are two-way and no U-turns exist, so many targets can only be
   reached by driving around a block, and many edges fall outside the largest
-  strongly connected component.
+  strongly connected component;
+- ``grid``: a 10 x 10 ``netgenerate --grid`` where every turn (U-turns
+  included) is allowed, so all edges into a junction share one end state;
+- ``restricted``: that grid with 15 % of its connections deleted by
+  ``netconvert`` (turn restrictions), so edges into one junction often differ;
 """
 
 from __future__ import annotations
@@ -33,6 +37,10 @@ ONEWAY_ARGS = (
     "--default.lanenumber=1",
     "--no-turnarounds",
 )
+
+
+GRID_ARGS = ("--grid", "--grid.number=10", "--grid.length=100")
+RESTRICTED_SHARE = 0.15
 
 
 @dataclass(frozen=True)
@@ -63,6 +71,49 @@ def generate_oneway_net(folder: Path) -> Path:
     return path
 
 
+def generate_grid_net(folder: Path) -> Path:
+    """A 10 x 10 junction grid with every turn allowed, made with SUMO's netgenerate."""
+    path = folder / "grid.net.xml"
+    subprocess.run(
+        [str(SUMO_HOME / "bin" / "netgenerate"), *GRID_ARGS, "--output-file", str(path)],
+        check=True,
+        capture_output=True,
+    )
+    return path
+
+
+def generate_restricted_net(folder: Path) -> Path:
+    """The grid with a fixed random 15 % of its connections deleted (turn restrictions)."""
+    import sumolib
+
+    grid = generate_grid_net(folder)
+    net = sumolib.net.readNet(str(grid), withConnections=True)
+    rng = np.random.default_rng(5)
+    deletions = [
+        f'<delete from="{edge.getID()}" to="{to_edge.getID()}"/>'
+        for edge in net.getEdges()
+        for to_edge in edge.getOutgoing()
+        if rng.random() < RESTRICTED_SHARE
+    ]
+    connections = folder / "restrictions.con.xml"
+    connections.write_text("<connections>\n" + "\n".join(deletions) + "\n</connections>\n")
+    path = folder / "restricted.net.xml"
+    subprocess.run(
+        [
+            str(SUMO_HOME / "bin" / "netconvert"),
+            "--sumo-net-file",
+            str(grid),
+            "--connection-files",
+            str(connections),
+            "--output-file",
+            str(path),
+        ],
+        check=True,
+        capture_output=True,
+    )
+    return path
+
+
 @pytest.fixture(scope="session")
 def network_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("compiled")
@@ -83,6 +134,20 @@ def drt_case(network_cache: Path) -> NetCase:
 def oneway_case(network_cache: Path, oneway_path: Path) -> NetCase:
     network = load_network(oneway_path, cache_dir=network_cache)
     return NetCase("oneway", oneway_path, network, NxReference(oneway_path))
+
+
+@pytest.fixture(scope="session")
+def grid_case(network_cache: Path, tmp_path_factory: pytest.TempPathFactory) -> NetCase:
+    path = generate_grid_net(tmp_path_factory.mktemp("grid"))
+    return NetCase("grid", path, load_network(path, cache_dir=network_cache), NxReference(path))
+
+
+@pytest.fixture(scope="session")
+def restricted_case(network_cache: Path, tmp_path_factory: pytest.TempPathFactory) -> NetCase:
+    path = generate_restricted_net(tmp_path_factory.mktemp("restricted"))
+    return NetCase(
+        "restricted", path, load_network(path, cache_dir=network_cache), NxReference(path)
+    )
 
 
 @pytest.fixture(scope="session", params=["drt", "oneway"])
