@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from dataclasses import dataclass
@@ -22,7 +23,17 @@ import numpy as np
 from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput
 from routing_svc.optimum import expected_cost, solve_pmedian
-from routing_svc.sa import Annealing, Fleet, FleetConfig, Objective, Vehicle, default_schedule
+from routing_svc.sa import (
+    Annealing,
+    Fleet,
+    FleetConfig,
+    Objective,
+    Vehicle,
+    default_probe,
+    default_schedule,
+    prior_counts,
+)
+from routing_svc.sa.schedules import DEFAULT_PROBE
 
 
 @dataclass(frozen=True)
@@ -102,6 +113,8 @@ def run_simulation(
     start: str = "first",
     checkpoints: int = 20,
     progress: bool = True,
+    probe: float | None = None,
+    step_scale: float = 0.5,
 ) -> dict[str, Any]:
     """Run the SA on ``targets`` draws and report the exact objective over time.
 
@@ -109,7 +122,12 @@ def run_simulation(
     random positions), ``first`` (the first distinct targets of the stream, as
     MacQueen's online k-means starts) or ``prior:N`` (the p-median of the
     first ``N`` targets, the paper's "deterministic first configuration that
-    the SA then refines"). Targets used to start count toward ``targets``.
+    the SA then refines"). Targets used to start count toward ``targets``,
+    and toward each vehicle's step counter (the prior targets it serves), so
+    that the SA goes on with the steps of a fleet that has seen them.
+    ``probe`` is the window of the backward finite difference as a fraction
+    of the cell radius ``R`` (:attr:`FleetConfig.probe`, network only);
+    ``step_scale`` is ``a / R`` of the step schedule.
     """
     from tqdm import tqdm
 
@@ -121,10 +139,19 @@ def run_simulation(
     config = FleetConfig(
         objective=objective,
         schedule=default_schedule(
-            typical_cost=space.typical_cost(), n_vehicles=n, power=objective.power
+            typical_cost=space.typical_cost(),
+            n_vehicles=n,
+            power=objective.power,
+            scale=step_scale,
         ),
         annealing=annealing,
         seed=seed,
+        probe=None
+        if probe is None
+        else default_probe(typical_cost=space.typical_cost(), n_vehicles=n, fraction=probe),
+        prior_counts=prior_counts(space, starts, [1.0] * n, stream[:used])
+        if start.startswith("prior")
+        else (),
     )
     fleet = Fleet.create(space, [(Vehicle(f"v{i:03d}"), p) for i, p in enumerate(starts)], config)
     speeds = np.ones(n)
@@ -163,6 +190,7 @@ def run_simulation(
         "annealing": None if annealing is None else annealing.to_dict(),
         "seed": seed,
         "start": start,
+        "probe": config.probe,
         "step": config.schedule.to_dict(),
         "demand": {"name": scenario.demand.name, "atoms": len(scenario.demand.positions)},
         "curve": curve,
@@ -197,14 +225,14 @@ def starting_positions(
         raise InvalidInput(f"the stream has fewer than {n} distinct targets")
     kind, _, count = start.partition(":")
     if kind == "prior" and count.isdigit() and int(count) >= n:
-        sample = stream[: int(count)]
+        sample = stream[: min(int(count), len(stream))]
         sites = list(dict.fromkeys(sample))
         if len(sites) < n:
             raise InvalidInput(f"the prior sample has fewer than {n} distinct targets")
         weights = np.array([sample.count(z) for z in sites], dtype=np.float64)
         matrix = scenario.space.cost_matrix(sites, sites) ** power
         solution = solve_pmedian(matrix, weights / weights.sum(), n)
-        return [sites[i] for i in solution.sites], int(count)
+        return [sites[i] for i in solution.sites], len(sample)
     raise InvalidInput(f"--start must be random, first or prior:N with N >= {n}, got {start!r}")
 
 
@@ -230,9 +258,23 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument(
         "--start",
-        default="first",
-        help="first (the first distinct targets, default) | random | prior:N "
-        "(p-median of the first N targets)",
+        default="prior:3000",
+        help="first (the first distinct targets) | random | prior:N "
+        "(p-median of the first N targets; default prior:3000)",
+    )
+    p.add_argument(
+        "--probe",
+        type=float,
+        default=DEFAULT_PROBE,
+        metavar="FRACTION",
+        help="window of the backward finite difference that sees the jumps of J on a "
+        "directed network, as a fraction of the cell radius R (default 0.05; 0: off)",
+    )
+    p.add_argument(
+        "--step-scale",
+        type=float,
+        default=0.5,
+        help="first step a = step_scale * R of the default schedule (default 0.5)",
     )
     p.add_argument("--checkpoints", type=int, default=20)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -242,6 +284,10 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.vehicles < 1 or args.targets < 0 or args.checkpoints < 1:
         raise InvalidInput("--vehicles and --checkpoints must be >= 1, --targets >= 0")
+    if not (math.isfinite(args.probe) and args.probe >= 0.0):
+        raise InvalidInput("--probe must be a fraction >= 0 (0: the paper's rule alone)")
+    if not (math.isfinite(args.step_scale) and args.step_scale > 0.0):
+        raise InvalidInput("--step-scale must be a number > 0")
     rng = np.random.default_rng(args.seed)
     if args.plane:
         scenario = plane_scenario(demand=args.demand, vehicles=args.vehicles, rng=rng)
@@ -261,6 +307,8 @@ def run(args: argparse.Namespace) -> int:
         start=args.start,
         checkpoints=args.checkpoints,
         progress=not args.quiet,
+        probe=args.probe if args.probe > 0 and not args.plane else None,
+        step_scale=args.step_scale,
     )
     print(json.dumps(report, indent=2))
     return 0

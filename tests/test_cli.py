@@ -21,7 +21,10 @@ def cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]
 
 
 def test_simulate_on_a_real_network_reports_the_gap_to_the_optimum() -> None:
-    out = cli("simulate", "--net", "drt", "--vehicles", "4", "--targets", "3000", "--quiet")
+    out = cli(
+        "simulate", "--net", "drt", "--vehicles", "4", "--targets", "3000", "--start", "first",
+        "--quiet",
+    )  # fmt: skip
     assert out.returncode == 0, out.stderr
     report = json.loads(out.stdout)
     curve = report["curve"]
@@ -50,6 +53,8 @@ def test_simulate_on_the_plane_is_deterministic() -> None:
         (("simulate", "--demand", "nowhere"), "demand"),
         (("simulate", "--net", "atlantis"), "atlantis"),
         (("simulate", "--start", "prior:2", "--vehicles", "5"), "start"),
+        (("simulate", "--probe", "-1"), "--probe"),
+        (("simulate", "--step-scale", "0"), "--step-scale"),
         (("replay", "--db", "/nonexistent/file.db"), "no database"),
     ],
 )

@@ -1,7 +1,15 @@
 """The pure stochastic-approximation core: no I/O, no network imports."""
 
 from routing_svc.sa.annealing import Annealing
-from routing_svc.sa.fleet import Dispatch, Fleet, FleetConfig, FleetState, Outcome, Vehicle
+from routing_svc.sa.fleet import (
+    Dispatch,
+    Fleet,
+    FleetConfig,
+    FleetState,
+    Outcome,
+    Vehicle,
+    prior_counts,
+)
 from routing_svc.sa.objectives import COVERAGE, ROUTING, Objective
 from routing_svc.sa.plane import EuclideanPlane
 from routing_svc.sa.schedules import (
@@ -10,6 +18,7 @@ from routing_svc.sa.schedules import (
     Floor,
     InverseScaling,
     Schedule,
+    default_probe,
     default_schedule,
     schedule_from_dict,
 )
@@ -35,6 +44,8 @@ __all__ = [
     "Schedule",
     "Space",
     "Vehicle",
+    "default_probe",
     "default_schedule",
+    "prior_counts",
     "schedule_from_dict",
 ]

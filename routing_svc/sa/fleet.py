@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Generic
+from typing import Any, Generic, cast
 
 import numpy as np
 
@@ -28,7 +28,10 @@ from routing_svc.sa.annealing import Annealing
 from routing_svc.sa.objectives import Objective
 from routing_svc.sa.requirements import build_requirement
 from routing_svc.sa.schedules import Counting, Schedule, schedule_from_dict
-from routing_svc.sa.space import P, Space
+from routing_svc.sa.space import DirectedSpace, P, Requirement, Space
+
+_TOLERANCE = 1e-9
+"""Relative gain below which a probe is taken as no better (rounding of equal paths)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -57,6 +60,25 @@ class FleetConfig:
     counting: Counting = Counting.VEHICLE
     annealing: Annealing | None = None
     seed: int = 0
+    probe: float | None = None
+    """Window ``h`` (cost) of the backward finite difference on a :class:`DirectedSpace`.
+
+    The paper's step (eq. (10)) is a stochastic gradient of the smooth part of
+    ``J`` only; on a directed network ``J`` also jumps where a reference passes
+    a target or a junction, and the step never sees it (its fixed points are
+    then not p-median optima). With a window, each target is also served from
+    one probe per vehicle ``j``, a point ``h`` behind its reference (or the
+    junction it last gave turns up at); every ``j`` whose probe serves the target
+    ``G_j > 0`` faster than the fleet does moves back toward it by
+    ``min(h, gamma_j G_j / h)``, a Kiefer-Wolfowitz estimate of the jump term of
+    the gradient. ``None``: exactly the paper's rule. Targets with requirements
+    (several types) make no probe.
+    """
+    prior_counts: tuple[int, ...] = ()
+    """Per vehicle (in the fleet's id order), the targets of a prior sample it
+    serves from its starting position (:func:`prior_counts`): its step counter
+    starts there, so a fleet started at the p-median of that sample goes on
+    with the small steps of a fleet that has seen it. Empty: all zero."""
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -65,6 +87,8 @@ class FleetConfig:
             "counting": self.counting.value,
             "annealing": None if self.annealing is None else self.annealing.to_dict(),
             "seed": self.seed,
+            "probe": self.probe,
+            **({"prior_counts": list(self.prior_counts)} if self.prior_counts else {}),
         }
 
     @classmethod
@@ -76,6 +100,8 @@ class FleetConfig:
             counting=Counting(data.get("counting", "vehicle")),
             annealing=None if annealing is None else Annealing.from_dict(annealing),
             seed=int(data.get("seed", 0)),
+            probe=None if data.get("probe") is None else float(data["probe"]),
+            prior_counts=tuple(int(c) for c in data.get("prior_counts", ())),
         )
 
 
@@ -86,6 +112,10 @@ class FleetState(Generic[P]):
     positions: list[P]
     updates: list[int]
     targets: int = 0
+    entries: list[P | None] = field(default_factory=list)
+    """Per vehicle, the junction behind its reference whose turns it gave up (the end
+    of an edge, see :meth:`DirectedSpace.entry`), or ``None`` when unknown; kept only
+    with :attr:`FleetConfig.probe`. Empty means all unknown."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,6 +146,9 @@ class Outcome(Generic[P]):
     """Cost of the random perturbation (0 without annealing)."""
     old_position: P
     new_position: P
+    backed_off: tuple[tuple[int, P], ...] = ()
+    """Vehicles (index, new position) that the backward probe moved back, in index
+    order; the mover among them made no forward step (:attr:`FleetConfig.probe`)."""
 
 
 @dataclass
@@ -144,6 +177,13 @@ class Fleet(Generic[P]):
         n = len(self.vehicles)
         if len(self.state.positions) != n or len(self.state.updates) != n:
             raise InvalidInput("one position and one update counter per vehicle")
+        prior = self.config.prior_counts
+        if prior and (len(prior) != n or min(prior) < 0):
+            raise InvalidInput("prior_counts needs one count >= 0 per vehicle")
+        if not self.state.entries:
+            self.state.entries = [None] * n
+        if len(self.state.entries) != n:
+            raise InvalidInput("one entry (or None) per vehicle")
         self._speeds = np.array([v.speed for v in self.vehicles], dtype=np.float64)
         self._types = tuple(v.type for v in self.vehicles)
         self._index = {v.id: i for i, v in enumerate(self.vehicles)}
@@ -161,7 +201,7 @@ class Fleet(Generic[P]):
             space=space,
             vehicles=tuple(v for v, _ in ordered),
             config=config,
-            state=FleetState([p for _, p in ordered], [0] * len(ordered), 0),
+            state=FleetState([p for _, p in ordered], [0] * len(ordered), 0, [None] * len(ordered)),
         )
 
     @property
@@ -171,11 +211,11 @@ class Fleet(Generic[P]):
 
     def step_size(self, vehicle: int) -> float:
         """``gamma_k`` that the next update of ``vehicle`` would use."""
-        k = (
-            self.state.updates[vehicle]
-            if self.config.counting is Counting.VEHICLE
-            else self.state.targets
-        )
+        prior = self.config.prior_counts
+        if self.config.counting is Counting.VEHICLE:
+            k = self.state.updates[vehicle] + (prior[vehicle] if prior else 0)
+        else:
+            k = self.state.targets + sum(prior)
         return self.config.schedule(k)
 
     def _search(self, target: P, requires: Sequence[str] | None) -> tuple[Dispatch[P], Any]:
@@ -204,17 +244,74 @@ class Fleet(Generic[P]):
             gamma=gamma, path_cost=found.mover_cost, speed=float(self._speeds[mover])
         )
         old = self.state.positions[mover]
-        new = self.space.advance(old, target, found.route, amount) if amount > 0.0 else old
+        probing = self._probing()
+        backed_off: list[tuple[int, P]] = []
+        if probing is not None and not requires:
+            backed_off = self._probe(*probing, target, found.completion_time)
+            if any(j == mover for j, _ in backed_off):
+                amount = 0.0
+        start = self.state.positions[mover]  # ``old`` unless the probe moved the mover back
+        new = self.space.advance(start, target, found.route, amount) if amount > 0.0 else start
+        entry = self.state.entries[mover]
+        if probing is not None and amount > 0.0:
+            directed, window = probing
+            entry = directed.entry(start, new, found.route, entry, window)
         noise = 0.0
         if self.config.annealing is not None:
             noise, rng = self.config.annealing.amount(seed=self.config.seed, k=self.state.targets)
             if noise > 0.0:
-                new = self.space.perturb(new, noise, rng)
+                walked = self.space.perturb(new, noise, rng)
+                if probing is not None:
+                    entry = probing[0].entry(new, walked, None, entry, probing[1])
+                new = walked
         index = self.state.targets
         self.state.positions[mover] = new
+        self.state.entries[mover] = entry
         self.state.updates[mover] += 1
         self.state.targets += 1
-        return Outcome(index, dispatch, gamma, amount, noise, old, new)
+        return Outcome(index, dispatch, gamma, amount, noise, old, new, tuple(backed_off))
+
+    def _probing(self) -> tuple[DirectedSpace[P], float] | None:
+        """The space and window of the backward probe, or ``None`` for the paper's rule."""
+        window = self.config.probe
+        if window is None or not _is_directed(type(self.space)):
+            return None
+        return cast(DirectedSpace[P], self.space), window
+
+    def _probe(
+        self, space: DirectedSpace[P], window: float, target: P, cost: float
+    ) -> list[tuple[int, P]]:
+        """The backward finite difference of ``J``; the vehicles it moved, with where to.
+
+        The paper's step follows the gradient of the smooth part of ``J`` and
+        misses its jump term (see :class:`DirectedSpace`). This estimates it. The
+        target is also served, in one search, from one probe per vehicle: the
+        point ``h`` behind its reference on its edge or, on a shorter stretch, the
+        junction behind it whose turns it gave up (:attr:`FleetState.entries`).
+        With ``c_j`` the probe's time and ``cost`` the fleet's, moving a vehicle
+        ``j`` that does not serve the target back to its probe changes the cost
+        of this target by ``-G_j = min(0, c_j - cost)``: a sample of the backward
+        difference ``J(x - h e_j) - J(x)``, whose jump part the paper's step
+        misses. Each ``j`` with ``G_j > 0`` moves ``min(h, gamma_j G_j / h)``
+        back toward its probe (never past it); a moved mover makes no forward
+        step for this target. The paper's step supplies the forward (smooth)
+        part of the gradient, the probe the backward jump.
+        """
+        positions, entries = self.state.positions, self.state.entries
+        probes = space.back_probes(positions, window, entries)
+        # only a probe that arrives before the fleet matters: the search stops there
+        times = space.arrival_times(target, probes, self._speeds, cost)
+        backed_off: list[tuple[int, P]] = []
+        for j, time in enumerate(times.tolist()):
+            gain = cost - time
+            if gain <= _TOLERANCE * cost:
+                continue
+            amount = min(window, self.step_size(j) * gain / window)
+            moved = space.back_off(positions[j], probes[j], amount)
+            entries[j] = space.entry(positions[j], moved, None, entries[j], window)
+            positions[j] = moved
+            backed_off.append((j, moved))
+        return backed_off
 
     def snapshot(self) -> dict[str, Any]:
         """JSON-ready state (floats round-trip exactly through ``json``)."""
@@ -222,6 +319,7 @@ class Fleet(Generic[P]):
             "positions": [self.space.encode(p) for p in self.state.positions],
             "updates": list(self.state.updates),
             "targets": self.state.targets,
+            "entries": [None if e is None else self.space.encode(e) for e in self.state.entries],
         }
 
     def restore(self, data: dict[str, Any]) -> None:
@@ -230,7 +328,11 @@ class Fleet(Generic[P]):
         updates = [int(u) for u in data["updates"]]
         if len(positions) != len(self.vehicles) or len(updates) != len(self.vehicles):
             raise InvalidInput("snapshot does not match the fleet's vehicles")
-        self.state = FleetState(positions, updates, int(data["targets"]))
+        raw = data.get("entries") or [None] * len(positions)
+        entries = [None if e is None else self.space.decode(e) for e in raw]
+        if len(entries) != len(positions):
+            raise InvalidInput("snapshot does not match the fleet's vehicles")
+        self.state = FleetState(positions, updates, int(data["targets"]), entries)
 
     def vehicle_index(self, vehicle_id: str) -> int:
         """Index of a vehicle by id (vehicles are sorted by id)."""
@@ -238,3 +340,37 @@ class Fleet(Generic[P]):
             return self._index[vehicle_id]
         except KeyError:
             raise InvalidInput(f"unknown vehicle {vehicle_id!r}") from None
+
+
+def prior_counts(
+    space: Space[P], positions: Sequence[P], speeds: Sequence[float], sample: Sequence[P]
+) -> tuple[int, ...]:
+    """How many targets of ``sample`` each vehicle serves from ``positions``.
+
+    Each target goes to the vehicle that reaches it first, exactly as
+    :meth:`Fleet.assign` chooses for a target that needs one vehicle (ties by
+    the lower index). ``positions`` and ``speeds`` are in the fleet's id order;
+    the result is :attr:`FleetConfig.prior_counts`.
+    """
+    n = len(positions)
+    anyone = Requirement(np.zeros(n, dtype=np.int64), np.ones(1, dtype=np.int64))
+    velocities = np.asarray(speeds, dtype=np.float64)
+    counts = [0] * n
+    for target in sample:
+        counts[space.assign(target, list(positions), velocities, anyone).mover] += 1
+    return tuple(counts)
+
+
+_DIRECTED: dict[type, bool] = {}
+
+
+def _is_directed(kind: type) -> bool:
+    """Whether spaces of class ``kind`` are :class:`DirectedSpace` s (checked once per class:
+    a runtime protocol check inspects every method)."""
+    known = _DIRECTED.get(kind)
+    if known is None:
+        known = _DIRECTED[kind] = all(
+            callable(getattr(kind, name, None))
+            for name in ("back_probes", "arrival_times", "back_off", "entry")
+        )
+    return known

@@ -17,7 +17,7 @@ fleet keeps vehicles sorted by id, so ties break by vehicle id.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Generic, Protocol, TypeVar
+from typing import Generic, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
@@ -115,4 +115,44 @@ class Space(Protocol[P]):
 
     def decode(self, data: dict[str, object]) -> P:
         """Inverse of :meth:`encode`; raise ``InvalidInput``/``UnknownEdge`` on bad data."""
+        ...
+
+
+@runtime_checkable
+class DirectedSpace(Protocol[P]):
+    """A space whose expected cost ``J`` jumps where a reference passes a target or junction.
+
+    On a directed road network a reference that moves forward stops reaching
+    the targets it just passed, and the turns of the junction it just crossed,
+    except by a loop: ``J`` jumps there. The paper's step (eq. (10), move the
+    server a step ``gamma_k`` toward the target) is the gradient of the smooth
+    part of ``J`` only; it never sees the jump term, so its fixed points need not
+    be p-median optima. The fleet estimates the jump term by a one-sided finite
+    difference from a point just behind each reference (see
+    :attr:`FleetConfig.probe`); on a stretch shorter than the window that point
+    is the junction behind the reference whose turns it gave up, which the
+    fleet keeps per vehicle (:attr:`FleetState.entries`).
+    """
+
+    def back_probes(self, positions: list[P], window: float, entries: list[P | None]) -> list[P]:
+        """Per reference, the point a cost ``window`` behind it; its entry if its edge is
+        shorter."""
+        ...
+
+    def arrival_times(
+        self, target: P, positions: list[P], speeds: FloatArray, cutoff: float
+    ) -> FloatArray:
+        """Each vehicle's travel time to ``target`` if below ``cutoff``, else ``inf``."""
+        ...
+
+    def back_off(self, position: P, probe: P, amount: float) -> P:
+        """Move ``position`` a cost ``amount`` back toward ``probe``, not past it."""
+        ...
+
+    def entry(self, old: P, new: P, route: object, previous: P | None, window: float) -> P | None:
+        """The junction (within about ``window``) behind a reference moved ``old`` -> ``new``.
+
+        ``route`` is the path of the move (``None`` for a move without one),
+        ``previous`` the entry of ``old``; ``None`` means unknown.
+        """
         ...
