@@ -3,7 +3,9 @@
 Both are served by uvicorn (1 worker, same options) and loaded by the same
 generator (``wrk``, Debian package ``wrk``) with the same concurrency, in the
 same run; the ratio of the two is the figure that counts (absolute numbers on
-these machines drift 2x between runs).
+these machines drift 2x between runs). Both servers are up at once and the
+two loads take turns (``--rounds``, 5 by default: trivial, service, trivial,
+...), so that the machine's drift during the run hits both alike.
 
 The service runs with SQLite (WAL, ``synchronous=FULL``) and a 50-vehicle fleet
 on the BadHersfeld network; with ``--postgres URL`` it also runs against
@@ -16,7 +18,11 @@ database can be reused.
 
 Usage::
 
-    python bench/http.py [--seconds 10] [--connections 16] [--postgres URL] [--quick]
+    python bench/http.py [--seconds 10] [--connections 16] [--rounds 5] [--probe F]
+                         [--postgres URL] [--quick]
+
+The fleets use the service's defaults (the backward probe on); ``--probe 0`` measures the
+paper's rule alone.
 
 Prints one JSON document.
 """
@@ -173,6 +179,22 @@ def run_wrk(
     }
 
 
+def merge_rounds(rounds: list[dict[str, float]]) -> dict[str, Any]:
+    """Sum alternating wrk rounds into one result (p50: median of the rounds, p99: worst)."""
+    total = sum(r["requests"] for r in rounds)
+    seconds = sum(r["requests"] / r["requests_per_second"] for r in rounds if r["requests"])
+    return {
+        "requests": total,
+        "errors": sum(r["errors"] for r in rounds),
+        "non_2xx": sum(r["non_2xx"] for r in rounds),
+        "timeouts": sum(r["timeouts"] for r in rounds),
+        "requests_per_second": total / seconds if seconds else 0.0,
+        "p50_ms": float(np.median([r["p50_ms"] for r in rounds])),
+        "p99_ms": max(r["p99_ms"] for r in rounds),
+        "rounds_requests_per_second": [round(r["requests_per_second"], 1) for r in rounds],
+    }
+
+
 def target_bodies(edge_ids: list[str], n: int, seed: int) -> list[str]:
     rng = np.random.default_rng(seed)
     return [
@@ -181,9 +203,11 @@ def target_bodies(edge_ids: list[str], n: int, seed: int) -> list[str]:
     ]
 
 
-def create_fleet(base: str, edge_ids: list[str], fleet_id: str, vehicles: int) -> None:
+def create_fleet(
+    base: str, edge_ids: list[str], fleet_id: str, vehicles: int, probe: float | None = None
+) -> None:
     rng = np.random.default_rng(5)
-    body = {
+    body: dict[str, Any] = {
         "id": fleet_id,
         "network": "town",
         "vehicles": [
@@ -191,6 +215,8 @@ def create_fleet(base: str, edge_ids: list[str], fleet_id: str, vehicles: int) -
             for i, e in enumerate(rng.choice(len(edge_ids), size=vehicles, replace=False))
         ],
     }
+    if probe is not None:
+        body["probe"] = probe
     httpx.post(base + "/v1/fleets", json=body, timeout=60).raise_for_status()
 
 
@@ -204,8 +230,16 @@ def serve_cmd(port: int, net: Path, data_dir: Path) -> list[str]:
 
 def bench_service(
     *, env: dict[str, str], net: Path, tmp: Path, instances: int, edge_ids: list[str],
-    seconds: int, connections: int, label: str,
+    seconds: int, connections: int, label: str, baseline: str | None = None, rounds: int = 1,
+    probe: float | None = None,
 ) -> dict[str, Any]:  # fmt: skip
+    """Load ``POST .../targets`` (then the batch route) of ``instances`` servers.
+
+    With ``baseline`` (the URL of the trivial app), the single-target load and
+    the same load on the baseline take turns in ``rounds`` rounds of
+    ``seconds / rounds`` each, so that a change of the machine's speed during
+    the run hits both alike; the result then has a ``"baseline"`` entry.
+    """
     ports = [free_port() for _ in range(instances)]
     procs = [
         start(serve_cmd(p, net, tmp / "networks"), env, f"http://127.0.0.1:{p}/healthz")
@@ -215,13 +249,25 @@ def bench_service(
         base = f"http://127.0.0.1:{ports[0]}"
         fleets = [f"{label}{RUN}_{i}" for i in range(4)]
         for fid in fleets:
-            create_fleet(base, edge_ids, fid, 50)
+            create_fleet(base, edge_ids, fid, 50, probe)
         bodies = target_bodies(edge_ids, 500, 1)
         urls = [f"http://127.0.0.1:{p}" for p in ports]
-        single = run_wrk(
-            urls, [f"/v1/fleets/{f}/targets" for f in fleets], bodies,
-            seconds=seconds, connections=connections,
-        )  # fmt: skip
+        share = max(1, seconds // rounds)
+        ours: list[dict[str, float]] = []
+        theirs: list[dict[str, float]] = []
+        for _ in range(rounds):
+            if baseline is not None:
+                load = run_wrk(
+                    [baseline], ["/v1/fleets/x/targets"], bodies,
+                    seconds=share, connections=connections,
+                )  # fmt: skip
+                theirs.append(load)
+            load = run_wrk(
+                urls, [f"/v1/fleets/{f}/targets" for f in fleets], bodies,
+                seconds=share, connections=connections,
+            )  # fmt: skip
+            ours.append(load)
+        single = merge_rounds(ours)
         batch_bodies = [
             json.dumps({"targets": [json.loads(b) for b in bodies[i : i + 50]]})
             for i in range(0, 500, 50)
@@ -232,12 +278,15 @@ def bench_service(
         )  # fmt: skip
         single["targets_per_second"] = single["requests_per_second"]
         batch["targets_per_second"] = batch["requests_per_second"] * 50
-        return {
+        report = {
             "instances": instances,
             "targets": single,
             "batch": batch,
             "targets_per_second_per_instance": single["targets_per_second"] / instances,
         }
+        if theirs:
+            report["baseline"] = merge_rounds(theirs)
+        return report
     finally:
         for proc in procs:
             stop(proc)
@@ -315,9 +364,17 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=int, default=10)
     parser.add_argument("--connections", type=int, default=16)
+    parser.add_argument(
+        "--rounds", type=int, default=5,
+        help="the baseline and the service take turns this many times (default 5)",
+    )  # fmt: skip
     parser.add_argument("--net", type=Path, default=BADHERSFELD)
     parser.add_argument("--postgres", default=None, help="SQLAlchemy URL of an empty database")
     parser.add_argument("--quick", action="store_true", help="2-second runs")
+    parser.add_argument(
+        "--probe", type=float, default=None,
+        help="the fleets' probe window (fraction of R; default: the service's, 0: off)",
+    )  # fmt: skip
     args = parser.parse_args()
     if shutil.which("wrk") is None:
         print("bench/http.py needs wrk: apt-get install wrk", file=sys.stderr)
@@ -334,6 +391,7 @@ def main() -> int:
         "baseline": "trivial FastAPI POST endpoint with a pydantic body (same uvicorn, same wrk)",
         "network": args.net.name,
         "vehicles_per_fleet": 50,
+        "fleet_probe": "service default" if args.probe is None else args.probe,
         "connections": args.connections,
         "seconds": seconds,
     }
@@ -348,24 +406,22 @@ def main() -> int:
             env, f"http://127.0.0.1:{port}/docs",
         )  # fmt: skip
         try:
-            bodies = target_bodies(edge_ids, 500, 1)
-            report["trivial"] = run_wrk(
-                [f"http://127.0.0.1:{port}"], ["/v1/fleets/x/targets"], bodies,
-                seconds=seconds, connections=args.connections,
+            sqlite_env = {**os.environ, "DATABASE_URL": f"sqlite:///{tmp / 'bench.db'}"}
+            report["sqlite"] = bench_service(
+                env=sqlite_env, net=args.net, tmp=tmp, instances=1, edge_ids=edge_ids,
+                seconds=seconds, connections=args.connections, label="s",
+                baseline=f"http://127.0.0.1:{port}", rounds=args.rounds, probe=args.probe,
             )  # fmt: skip
         finally:
             stop(trivial)
-        sqlite_env = {**os.environ, "DATABASE_URL": f"sqlite:///{tmp / 'bench.db'}"}
-        report["sqlite"] = bench_service(
-            env=sqlite_env, net=args.net, tmp=tmp, instances=1, edge_ids=edge_ids,
-            seconds=seconds, connections=args.connections, label="s",
-        )  # fmt: skip
+        report["trivial"] = report["sqlite"].pop("baseline")
         if args.postgres:
             pg_env = {**os.environ, "DATABASE_URL": args.postgres}
             for n in (1, 2):
                 report[f"postgresql_{n}_instances"] = bench_service(
                     env=pg_env, net=args.net, tmp=tmp, instances=n, edge_ids=edge_ids,
                     seconds=seconds, connections=args.connections, label=f"p{n}_",
+                    probe=args.probe,
                 )  # fmt: skip
         if args.postgres:
             appends = 100 if args.quick else 400

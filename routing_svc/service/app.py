@@ -59,8 +59,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         log = EventLog(settings.database_url).open()
         registry = NetworkRegistry(data_dir=settings.data_dir, max_bytes=settings.max_network_bytes)
         feeder: asyncio.Task[None] | None = None
+        service: FleetService | None = None
         try:
             load_networks(registry, log, settings)
+            for entry in registry.all():
+                await asyncio.to_thread(entry.warm_up)
             service = FleetService(log, registry, recent_window=settings.recent_window)
             app.state.settings = settings
             app.state.networks = registry
@@ -75,6 +78,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 feeder.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
                     await feeder
+            if service is not None:
+                await asyncio.to_thread(service.close)  # commits what is queued
             log.close()
 
     app = FastAPI(
@@ -84,11 +89,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
     )
     install_problem_handlers(app)
-    for router in (
+    for router in (  # the hot routes first: the router tries routes in this order
+        targets.router,
         health.router,
         networks.router,
         fleets.router,
-        targets.router,
         stream.router,
         dashboard.router,
     ):

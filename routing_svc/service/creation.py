@@ -3,7 +3,10 @@
 Everything that needs a choice is decided here, once, and stored: snapped
 starting positions, the default step schedule (derived from the network's
 typical trip cost, see :func:`routing_svc.sa.schedules.default_schedule`),
-the optimum start and the reference optimum. Replay then needs none of it.
+the probe window (:func:`routing_svc.sa.schedules.default_probe`), the
+optimum start with the step counters it implies
+(:func:`routing_svc.sa.prior_counts`) and the reference optimum. Replay then
+needs none of it.
 """
 
 from __future__ import annotations
@@ -11,8 +14,15 @@ from __future__ import annotations
 from typing import Any
 
 from routing_svc.errors import InvalidInput
-from routing_svc.sa import Annealing, FleetConfig, Objective, default_schedule
-from routing_svc.sa.schedules import Counting, schedule_from_dict
+from routing_svc.sa import (
+    Annealing,
+    FleetConfig,
+    Objective,
+    default_probe,
+    default_schedule,
+    prior_counts,
+)
+from routing_svc.sa.schedules import DEFAULT_PROBE, Counting, schedule_from_dict
 from routing_svc.service.networks import NetworkEntry
 from routing_svc.service.reference import (
     build_demand,
@@ -22,6 +32,16 @@ from routing_svc.service.reference import (
 )
 from routing_svc.service.schemas import FleetSpec
 from routing_svc.types import NetPosition
+
+
+def _probe_window(spec: FleetSpec, typical_cost: float) -> float | None:
+    """The fleet's probe window (cost units), or ``None`` for the paper's rule alone."""
+    fraction = DEFAULT_PROBE if spec.probe is None else spec.probe
+    if fraction == 0.0:
+        return None
+    return default_probe(
+        typical_cost=typical_cost, n_vehicles=len(spec.vehicles), fraction=fraction
+    )
 
 
 def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any]:
@@ -45,8 +65,12 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
         positions.sort()
         ordered = sorted(spec.vehicles, key=lambda v: v.id)
         starts = {v.id: p for v, p in zip(ordered, positions, strict=True)}
+        counts = prior_counts(
+            space, [starts[v.id] for v in ordered], [v.speed for v in ordered], sample
+        )
     else:
         starts = {v.id: entry.resolve(v.position) for v in spec.vehicles if v.position}
+        counts = ()
     schedule = (
         schedule_from_dict(spec.step.to_dict())
         if spec.step is not None
@@ -62,6 +86,8 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
         if spec.annealing is None
         else Annealing(spec.annealing.scale, spec.annealing.decay),
         seed=spec.seed,
+        probe=_probe_window(spec, space.typical_cost()),
+        prior_counts=counts,
     )
     reference = None
     if spec.reference_demand is not None:

@@ -1,15 +1,17 @@
 """Fleet operations over the event log: the domain side of the REST API.
 
-Every write goes through :meth:`EventLog.append_group` (group commit, flat
-combining): a write request joins its fleet's queue; while a commit is in
-progress the requests that arrive wait there, and one of the waiting threads
-becomes the leader, takes everything queued (up to :data:`GROUP_CAP` targets)
-and commits it in one transaction. Under the fleet's lock the cached
+Every write goes through one writer thread per service (group commit): a
+write request joins the service's queue and gets a future; the writer takes
+everything queued (up to :data:`GROUP_CAP` events), and commits the requests
+of all fleets in it in one transaction (:meth:`EventLog.append_groups`), so
+one ``fsync`` acknowledges them all. Under each fleet's lock the cached
 :class:`FleetRuntime` first replays the events other workers (or hosts) wrote
 since it last looked, then computes each request's events in queue order; a
-request that fails with a domain error fails alone. Every answer is returned
-only after the transaction committed. A cache that may have diverged (an
-append that failed after computing) is dropped and rebuilt from the log.
+request that fails with a domain error fails alone. Every future is resolved
+only after the transaction committed. If the shared transaction fails, each
+fleet's requests are committed on their own, so one fleet's trouble cannot
+fail another's requests; a cache that may have diverged (an append that
+failed after computing) is dropped and rebuilt from the log.
 """
 
 from __future__ import annotations
@@ -19,18 +21,25 @@ import json
 import threading
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from concurrent.futures import Future
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
 
 from prometheus_client import Histogram
 
-from routing_svc.errors import Conflict, RoutingSvcError, UnknownFleet, UnknownNetwork
+from routing_svc.errors import (
+    Conflict,
+    RoutingSvcError,
+    StorageError,
+    UnknownFleet,
+    UnknownNetwork,
+)
 from routing_svc.service.creation import build_created_payload
 from routing_svc.service.networks import NetworkEntry, NetworkRegistry
 from routing_svc.service.runtime import FleetRuntime, dumps
 from routing_svc.service.schemas import FleetSpec, TargetSpec
-from routing_svc.store import EventLog, EventRecord, GroupItem, NewEvent
+from routing_svc.store import EventLog, EventRecord, FleetGroup, GroupItem, NewEvent
 from routing_svc.types import NetPosition
 
 SNAPSHOT_EVERY = 64
@@ -53,36 +62,79 @@ class _Diverged(Exception):
 
 
 class _Pending:
-    """One write request waiting in its fleet's queue."""
+    """One write request waiting in the service's queue."""
 
-    __slots__ = ("compute", "digest", "done", "error", "key", "result", "size")
+    __slots__ = ("compute", "digest", "fleet_id", "future", "key", "size")
 
-    def __init__(self, compute: Compute, key: str | None, digest: str | None, size: int) -> None:
+    def __init__(
+        self, fleet_id: str, compute: Compute, key: str | None, digest: str | None, size: int
+    ) -> None:
+        self.fleet_id = fleet_id
         self.compute = compute
         self.key = key
         self.digest = digest
         self.size = size
-        self.done = False
-        self.result: tuple[list[str], int] | None = None
-        self.error: BaseException | None = None
-
-    def answer(self) -> tuple[list[str], int]:
-        """The result, or raise the error (only once ``done``)."""
-        if self.error is not None:
-            raise self.error
-        assert self.result is not None
-        return self.result
+        self.future: Future[tuple[list[str], int]] = Future()
+        self.future.set_running_or_notify_cancel()  # queued means running: no cancelling
 
 
-class _Queue:
-    """A fleet's write queue and whether a leader is committing from it."""
+class _FleetJob:
+    """One fleet's share of a commit: its runtime, requests and callbacks."""
 
-    __slots__ = ("busy", "cond", "items")
+    def __init__(self, service: FleetService, fleet_id: str, group: list[_Pending]) -> None:
+        self.service = service
+        self.fleet_id = fleet_id
+        self.group = group
+        self.runtime = service._runtime(fleet_id, fresh=False)
+        self.before = self.runtime.version
+        self.diverged: list[_Pending] = []
 
-    def __init__(self) -> None:
-        self.cond = threading.Condition()
-        self.items: deque[_Pending] = deque()
-        self.busy = False
+    def build(
+        self, missed: list[EventRecord], fresh: list[int]
+    ) -> list[list[NewEvent] | RoutingSvcError]:
+        runtime = self.runtime
+        self.service._replay(runtime, missed)
+        self.before = runtime.version
+        out: list[list[NewEvent] | RoutingSvcError] = []
+        for index in fresh:
+            at = runtime.version
+            pending = self.group[index]
+            try:
+                out.append(pending.compute(runtime))
+            except RoutingSvcError as exc:
+                if runtime.version != at:
+                    self.diverged.append(pending)
+                    pending.future.set_exception(exc)
+                    raise _Diverged(str(exc)) from exc
+                out.append(exc)
+        return out
+
+    def snapshot(self, version: int) -> str | None:
+        due = version // SNAPSHOT_EVERY != self.before // SNAPSHOT_EVERY
+        return self.runtime.snapshot_json() if due else None
+
+    def request(self) -> FleetGroup:
+        return FleetGroup(
+            self.fleet_id,
+            self.runtime.version,
+            tuple((p.key, p.digest) for p in self.group),
+            self.build,
+            self.snapshot,
+        )
+
+    def settle(self, items: list[GroupItem]) -> None:
+        """Resolve every request's future from its :class:`GroupItem`."""
+        COMMIT_GROUP_SIZE.observe(len(self.group))
+        for pending, item in zip(self.group, items, strict=True):
+            if item.error is not None:
+                pending.future.set_exception(item.error)
+            else:
+                last = item.events[-1].seq if item.events else item.version
+                pending.future.set_result(([e.result_json or "{}" for e in item.events], last))
+        try:
+            self.service._replay(self.runtime, items[0].missed)  # duplicates build nothing
+        except BaseException:
+            self.service._cache.pop(self.fleet_id, None)
 
 
 def request_hash(body: Any) -> str:
@@ -99,8 +151,11 @@ class FleetService:
         self.recent_window = recent_window
         self._cache: dict[str, FleetRuntime] = {}
         self._locks: dict[str, threading.Lock] = {}
-        self._queues: dict[str, _Queue] = {}
         self._locks_guard = threading.Lock()
+        self._queue: deque[_Pending] = deque()
+        self._queue_cond = threading.Condition()
+        self._writer: threading.Thread | None = None
+        self._closed = False
 
     # -- plumbing ---------------------------------------------------------------
 
@@ -158,7 +213,15 @@ class FleetService:
             raise UnknownFleet(f"no fleet {fleet_id!r}")
         return runtime
 
-    def _append(
+    def is_cached(self, fleet_id: str) -> bool:
+        """Whether the fleet's runtime is in memory (a write then needs no database read
+        before it joins the queue)."""
+        runtime = self._cache.get(fleet_id)
+        return runtime is not None and not runtime.deleted
+
+    # -- the writer -------------------------------------------------------------
+
+    def submit(
         self,
         fleet_id: str,
         compute: Compute,
@@ -166,8 +229,8 @@ class FleetService:
         idempotency_key: str | None = None,
         digest: str | None = None,
         size: int = 1,
-    ) -> tuple[list[str], int]:
-        """Commit ``compute(runtime) -> [NewEvent]`` with whatever else is queued.
+    ) -> Future[tuple[list[str], int]]:
+        """Queue ``compute(runtime) -> [NewEvent]`` for the next group commit.
 
         Parameters
         ----------
@@ -185,113 +248,116 @@ class FleetService:
 
         Returns
         -------
-        tuple[list[str], int]
-            Each event's result JSON and the ``seq`` of the request's last
-            event (the fleet's version if it wrote none); returned only after
-            the transaction committed.
+        concurrent.futures.Future
+            Resolves, only after the transaction committed, to each event's
+            result JSON and the ``seq`` of the request's last event (the
+            fleet's version if it wrote none), or to the request's error.
         """
-        with self._locks_guard:
-            queue = self._queues.setdefault(fleet_id, _Queue())
-        mine = _Pending(compute, idempotency_key, digest, size)
-        with queue.cond:
-            queue.items.append(mine)
-            while queue.busy and not mine.done:
-                queue.cond.wait()
-            if mine.done:
-                return mine.answer()
-            queue.busy = True
-        try:
-            while not mine.done:
-                with queue.cond:
-                    group = [queue.items.popleft()]
-                    total = group[0].size
-                    while queue.items and total + queue.items[0].size <= GROUP_CAP:
-                        total += queue.items[0].size
-                        group.append(queue.items.popleft())
-                retry = self._commit_group(fleet_id, group)
-                with queue.cond:
-                    for pending in group:
-                        pending.done = pending not in retry
-                    queue.items.extendleft(reversed(retry))
-                    queue.cond.notify_all()
-        finally:
-            with queue.cond:
-                queue.busy = False
-                queue.cond.notify_all()
-        return mine.answer()
+        mine = _Pending(fleet_id, compute, idempotency_key, digest, size)
+        with self._queue_cond:
+            if self._closed:
+                raise StorageError("the fleet service is shut down")
+            self._queue.append(mine)
+            if self._writer is None:
+                self._writer = threading.Thread(
+                    target=self._write_loop, name="routing-svc-writer", daemon=True
+                )
+                self._writer.start()
+            self._queue_cond.notify()
+        return mine.future
+
+    def close(self) -> None:
+        """Commit what is queued, then stop the writer thread."""
+        with self._queue_cond:
+            self._closed = True
+            self._queue_cond.notify_all()
+            writer = self._writer
+        if writer is not None and writer is not threading.current_thread():
+            writer.join()
+
+    def _write_loop(self) -> None:
+        while True:
+            with self._queue_cond:
+                while not self._queue and not self._closed:
+                    self._queue_cond.wait()
+                if not self._queue:
+                    return
+                batch = [self._queue.popleft()]
+                total = batch[0].size
+                while self._queue and total + self._queue[0].size <= GROUP_CAP:
+                    total += self._queue[0].size
+                    batch.append(self._queue.popleft())
+            try:
+                self._commit(batch)
+            except BaseException as exc:  # never leave a caller waiting
+                for pending in batch:
+                    if not pending.future.done():
+                        pending.future.set_exception(exc)
+
+    def _commit(self, batch: list[_Pending]) -> None:
+        """Commit a batch: all fleets in one transaction, else fleet by fleet."""
+        by_fleet: dict[str, list[_Pending]] = {}
+        for pending in batch:
+            by_fleet.setdefault(pending.fleet_id, []).append(pending)
+        if len(by_fleet) > 1 and self._commit_together(by_fleet):
+            return
+        for fleet_id, group in by_fleet.items():
+            while group:
+                group = self._commit_group(fleet_id, group)
+
+    def _commit_together(self, by_fleet: dict[str, list[_Pending]]) -> bool:
+        """One transaction for several fleets; ``False`` (nothing resolved, caches of
+        the fleets involved dropped) if it failed."""
+        with ExitStack() as locks:
+            jobs: list[_FleetJob] = []
+            for fleet_id in sorted(by_fleet):
+                locks.enter_context(self._locked(fleet_id))
+                try:
+                    jobs.append(_FleetJob(self, fleet_id, by_fleet[fleet_id]))
+                except BaseException:
+                    self._cache.pop(fleet_id, None)
+                    return False
+            try:
+                results = self.log.append_groups([job.request() for job in jobs])
+            except BaseException:
+                for job in jobs:
+                    self._cache.pop(job.fleet_id, None)
+                    for pending in job.diverged:
+                        job.group.remove(pending)  # its future holds its error
+                return False
+            for job, items in zip(jobs, results, strict=True):
+                job.settle(items)
+            return True
 
     def _commit_group(self, fleet_id: str, group: list[_Pending]) -> list[_Pending]:
-        """Run one :meth:`EventLog.append_group` for ``group``; set each answer.
+        """One fleet's requests in one transaction; resolve their futures.
 
         Returns
         -------
         list[_Pending]
-            The requests to queue again (nothing was written for them): after
+            The requests to commit again (nothing was written for them): after
             a request failed having changed the runtime, which is then dropped.
         """
         with self._locked(fleet_id):
             try:
-                runtime = self._runtime(fleet_id, fresh=False)
+                job = _FleetJob(self, fleet_id, group)
             except BaseException as exc:
                 for pending in group:
-                    pending.error = exc
+                    pending.future.set_exception(exc)
                 return []
-            before = [runtime.version]
-            diverged: list[_Pending] = []
-
-            def build(missed: list[EventRecord], fresh: list[int]) -> list[Any]:
-                self._replay(runtime, missed)
-                before[0] = runtime.version
-                out: list[list[NewEvent] | RoutingSvcError] = []
-                for index in fresh:
-                    at = runtime.version
-                    try:
-                        out.append(group[index].compute(runtime))
-                    except RoutingSvcError as exc:
-                        if runtime.version != at:
-                            group[index].error = exc
-                            diverged.append(group[index])
-                            raise _Diverged(str(exc)) from exc
-                        out.append(exc)
-                return out
-
-            def snapshot(version: int) -> str | None:
-                due = version // SNAPSHOT_EVERY != before[0] // SNAPSHOT_EVERY
-                return runtime.snapshot_json() if due else None
-
             try:
-                items = self.log.append_group(
-                    fleet_id,
-                    expected_version=runtime.version,
-                    requests=[(p.key, p.digest) for p in group],
-                    build=build,
-                    snapshot=snapshot,
-                )
+                (items,) = self.log.append_groups([job.request()])
             except _Diverged:
                 self._cache.pop(fleet_id, None)
-                return [p for p in group if p not in diverged]
+                return [p for p in group if p not in job.diverged]
             except BaseException as exc:
                 self._cache.pop(fleet_id, None)
                 for pending in group:
-                    pending.error = exc
+                    if not pending.future.done():
+                        pending.future.set_exception(exc)
                 return []
-            COMMIT_GROUP_SIZE.observe(len(group))
-            for pending, item in zip(group, items, strict=True):
-                self._settle(pending, item)
-            try:
-                self._replay(runtime, items[0].missed)  # a group of duplicates builds nothing
-            except BaseException:
-                self._cache.pop(fleet_id, None)
+            job.settle(items)
             return []
-
-    @staticmethod
-    def _settle(pending: _Pending, item: GroupItem) -> None:
-        """Set a request's answer from its :class:`GroupItem`."""
-        if item.error is not None:
-            pending.error = item.error
-            return
-        last = item.events[-1].seq if item.events else item.version
-        pending.result = ([e.result_json or "{}" for e in item.events], last)
 
     # -- fleets -----------------------------------------------------------------
 
@@ -354,15 +420,18 @@ class FleetService:
             (entry.resolve(t.position), list(t.requires) if t.requires else None) for t in targets
         ]
 
-    def post_targets(
+    def submit_targets(
         self,
         fleet_id: str,
         targets: Sequence[TargetSpec],
         *,
         idempotency_key: str | None = None,
         body: Any = None,
-    ) -> tuple[list[str], int]:
-        """Apply targets in order in one transaction; return each result's JSON text."""
+    ) -> Future[tuple[list[str], int]]:
+        """Queue targets to be applied in order in one transaction (see :meth:`submit`).
+
+        Positions are resolved first, so a bad position fails here and queues nothing.
+        """
         resolved = self._resolve_targets(fleet_id, targets)
 
         def compute(runtime: FleetRuntime) -> list[NewEvent]:
@@ -373,9 +442,22 @@ class FleetService:
             return out
 
         digest = request_hash(body) if idempotency_key is not None else None
-        return self._append(
+        return self.submit(
             fleet_id, compute, idempotency_key=idempotency_key, digest=digest, size=len(resolved)
         )
+
+    def post_targets(
+        self,
+        fleet_id: str,
+        targets: Sequence[TargetSpec],
+        *,
+        idempotency_key: str | None = None,
+        body: Any = None,
+    ) -> tuple[list[str], int]:
+        """Apply targets in order in one transaction; return each result's JSON text."""
+        return self.submit_targets(
+            fleet_id, targets, idempotency_key=idempotency_key, body=body
+        ).result()
 
     def assign(self, fleet_id: str, target: TargetSpec) -> dict[str, Any]:
         ((position, requires),) = self._resolve_targets(fleet_id, [target])
@@ -406,7 +488,7 @@ class FleetService:
             payload, result = runtime.apply_travel_times(times)
             return [NewEvent("weights_updated", payload, result)]
 
-        results, _ = self._append(fleet_id, compute)
+        results, _ = self.submit(fleet_id, compute).result()
         data: dict[str, Any] = json.loads(results[0])
         return data
 

@@ -52,6 +52,7 @@ class InProcessFleetClient:
         self.service = FleetService(self.log, self.networks, recent_window=recent_window)
 
     def close(self) -> None:
+        self.service.close()
         self.log.close()
         self._tmp.cleanup()
 

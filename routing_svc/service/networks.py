@@ -8,9 +8,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from routing_svc.errors import InvalidInput, InvalidNetwork, UnknownEdge, UnknownNetwork
 from routing_svc.network import CompiledNetwork, RoadSpace, Snapper, load_network
 from routing_svc.network.safe_xml import check_net_xml_file, read_net_bytes
+from routing_svc.sa.space import Requirement
 from routing_svc.service.schemas import EdgePosition, LonLatPosition, Position, XYPosition
 from routing_svc.types import NetPosition
 
@@ -37,6 +40,16 @@ class NetworkEntry:
         if cost not in self._spaces:
             self._spaces[cost] = RoadSpace(self.network, cost=cost)  # type: ignore[arg-type]
         return self._spaces[cost]
+
+    def warm_up(self) -> None:
+        """Run each compiled kernel once (a search, a move, a description), so that
+        the first request does not pay for loading or compiling them."""
+        here = NetPosition(0, 0.0)
+        space = self.space("length")
+        one = Requirement(np.zeros(1, dtype=np.int64), np.ones(1, dtype=np.int64))
+        found = space.assign(here, [here], np.ones(1), one)
+        space.advance(here, here, found.route, 0.0)
+        self.describe(here)
 
     def resolve(self, position: Position) -> NetPosition:
         """A position from the API (edge/offset, x/y or lon/lat) on this network."""
@@ -71,10 +84,9 @@ class NetworkEntry:
             "x": x,
             "y": y,
         }
-        if self.network.projection is not None:
-            lon, lat = space.lonlat(position)
-            out["lon"] = lon
-            out["lat"] = lat
+        projection = self.network.projection
+        if projection is not None and projection.supported:
+            out["lon"], out["lat"] = projection.point_to_lonlat(x, y)
         return out
 
     def summary(self) -> dict[str, Any]:

@@ -86,6 +86,10 @@ class FleetRuntime:
             "moved_by": outcome.moved_by,
             "noise": outcome.noise,
             "new_position": self.entry.describe(outcome.new_position),
+            "backed_off": [
+                {"vehicle": self.fleet.vehicles[j].id, "position": self.entry.describe(p)}
+                for j, p in outcome.backed_off
+            ],
         }
         payload = {"target": self.base_space.encode(target), "requires": result["requires"]}
         self.version = seq
@@ -174,6 +178,7 @@ class FleetRuntime:
             "counting": cfg.counting.value,
             "annealing": None if cfg.annealing is None else cfg.annealing.to_dict(),
             "seed": cfg.seed,
+            "probe": cfg.probe,
             "version": self.version,
             "targets": self.fleet.state.targets,
             "vehicles": [

@@ -93,6 +93,21 @@ class FleetSpec(Strict):
     vehicles: Annotated[list[VehicleSpec], Field(min_length=1, max_length=10_000)]
     start: StartSpec | None = None
     reference_demand: DemandSpec | None = None
+    probe: (
+        Annotated[
+            float,
+            Field(
+                allow_inf_nan=False,
+                ge=0.0,
+                le=1.0,
+                description="Window of the backward probe that sees where the expected "
+                "cost jumps on a directed network, as a fraction of the cell radius "
+                "R = typical trip cost / sqrt(vehicles); default 0.05, 0 = the paper's "
+                "rule alone.",
+            ),
+        ]
+        | None
+    ) = None
 
     @field_validator("vehicles")
     @classmethod

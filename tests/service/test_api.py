@@ -235,3 +235,64 @@ def test_a_network_uploaded_through_one_instance_serves_another(
     created = second.post("/v1/fleets", json=fleet_body(network="town"))
     assert created.status_code == 201, created.text
     assert first.get("/v1/fleets/f1").json()["network"] == "town"
+
+
+def test_the_probe_is_on_by_default_and_can_be_turned_off(client: TestClient) -> None:
+    radius = SPACE.typical_cost() / np.sqrt(3)
+    default = client.post("/v1/fleets", json=fleet_body("on")).json()
+    assert default["probe"] == pytest.approx(0.05 * radius)
+    wider = client.post("/v1/fleets", json=fleet_body("wide", probe=0.2)).json()
+    assert wider["probe"] == pytest.approx(0.2 * radius)
+    off = client.post("/v1/fleets", json=fleet_body("off", probe=0)).json()
+    assert off["probe"] is None
+    bad = client.post("/v1/fleets", json=fleet_body("bad", probe=-0.1))
+    assert bad.status_code == 422 and bad.headers["content-type"] == "application/problem+json"
+    assert client.get("/v1/fleets/bad").status_code == 404
+
+
+def test_an_optimum_start_counts_the_sample_in_the_step_sizes(client: TestClient) -> None:
+    rng = np.random.default_rng(12)
+    sample = [{"edge": edge(int(e)), "offset": 0.0} for e in rng.integers(NET.n_edges, size=60)]
+    body = fleet_body(
+        vehicles=[{"id": "a"}, {"id": "b"}, {"id": "c", "speed": 2.0}],
+        start={"optimum": {"sample": sample}},
+    )
+    fleet = client.post("/v1/fleets", json=body).json()
+    steps = client.get("/v1/fleets/f1/metrics").json()["step_size"]
+    # independent count: each sample target goes to the vehicle with the least
+    # either-way travel time (ties: lower index)
+    starts = [
+        NetPosition(NET.edge_index[v["position"]["edge"]], v["position"]["offset"])
+        for v in fleet["vehicles"]
+    ]
+    speeds = np.array([v["speed"] for v in fleet["vehicles"]])
+    points = [NetPosition(NET.edge_index[t["edge"]], 0.0) for t in sample]
+    times = SPACE.cost_matrix(starts, points) / speeds[:, None]
+    counts = np.bincount(times.argmin(axis=0), minlength=3)
+    assert counts.sum() == 60
+    a, power = fleet["step"]["a"], fleet["step"]["power"]
+    for v, k in zip(fleet["vehicles"], counts, strict=True):
+        assert steps[v["id"]] == pytest.approx(a / (k + 1) ** power)
+    assert all(v["updates"] == 0 for v in fleet["vehicles"])
+
+
+def test_the_answers_say_every_vehicle_that_moved(client: TestClient) -> None:
+    rng = np.random.default_rng(14)
+    vehicles = [
+        {"id": f"v{i}", "position": {"edge": edge(int(e)), "offset": 0.0}}
+        for i, e in enumerate(rng.choice(NET.n_edges, size=8, replace=False))
+    ]
+    fleet = client.post("/v1/fleets", json=fleet_body(vehicles=vehicles, probe=0.2)).json()
+    known = {v["id"]: v["position"] for v in fleet["vehicles"]}
+    backed = 0
+    for e in rng.integers(NET.n_edges, size=300):
+        r = client.post("/v1/fleets/f1/targets", json={"position": {"edge": edge(int(e))}})
+        assert r.status_code == 200, r.text
+        answer = r.json()
+        for back in answer["backed_off"]:
+            known[back["vehicle"]] = back["position"]
+            backed += 1
+        known[answer["moved"]] = answer["new_position"]
+    assert backed > 0  # the probe did move vehicles back on this run
+    now = client.get("/v1/fleets/f1").json()["vehicles"]
+    assert {v["id"]: v["position"] for v in now} == known

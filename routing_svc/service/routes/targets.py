@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import asyncio
+from collections.abc import Sequence
+from concurrent.futures import Future
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Header, Response
+from fastapi import APIRouter, Depends, Header, Request, Response
+from fastapi.exceptions import RequestValidationError
 from prometheus_client import Counter
+from pydantic import ValidationError
 from starlette.concurrency import run_in_threadpool
 
 from routing_svc.service.deps import fleet_service
@@ -15,6 +20,9 @@ from routing_svc.service.schemas import TargetBatch, TargetSpec, TravelTimes
 router = APIRouter(prefix="/v1/fleets/{fleet_id}", tags=["targets"])
 Service = Annotated[FleetService, Depends(fleet_service)]
 IdempotencyKey = Annotated[str | None, Header(min_length=1, max_length=200)]
+
+TARGET_SPEC_REF = "#/components/schemas/TargetSpec"
+"""The body schema of the single-target route (registered by ``/assign``'s body)."""
 
 TARGETS_APPLIED = Counter("routing_svc_targets_total", "Targets applied (acknowledged)")
 
@@ -26,24 +34,58 @@ TARGET_RESPONSE: dict[int | str, dict[str, Any]] = {
 }
 
 
-@router.post("/targets", responses=TARGET_RESPONSE, response_class=Response)
+async def _committed(
+    service: FleetService,
+    fleet_id: str,
+    targets: Sequence[TargetSpec],
+    idempotency_key: str | None,
+    body: Any,
+) -> tuple[list[str], int]:
+    """Queue the targets for the service's writer and wait for the commit.
+
+    The event loop only resolves the positions and queues the request when the
+    fleet is in memory; a fleet that must first be read from the database is
+    queued from a worker thread.
+    """
+
+    def submit() -> Future[tuple[list[str], int]]:
+        return service.submit_targets(fleet_id, targets, idempotency_key=idempotency_key, body=body)
+
+    future = submit() if service.is_cached(fleet_id) else await run_in_threadpool(submit)
+    return await asyncio.wrap_future(future)
+
+
+@router.post(
+    "/targets",
+    responses=TARGET_RESPONSE,
+    response_class=Response,
+    openapi_extra={
+        "requestBody": {
+            "required": True,
+            "content": {"application/json": {"schema": {"$ref": TARGET_SPEC_REF}}},
+        }
+    },
+)
 async def post_target(
     fleet_id: str,
-    target: TargetSpec,
-    service: Service,
+    request: Request,
     idempotency_key: IdempotencyKey = None,
 ) -> Response:
     """Serve a target: the closest vehicles per required type serve it and the one that
     arrives last moves a step toward it. A retry with the same ``Idempotency-Key``
-    returns the stored answer and applies nothing."""
-    results, _ = await run_in_threadpool(
-        lambda: service.post_targets(
-            fleet_id,
-            [target],
-            idempotency_key=idempotency_key,
-            body=target.model_dump(mode="json"),
-        )
-    )
+    returns the stored answer and applies nothing.
+
+    The body is a ``TargetSpec``; this hot route validates it straight from the
+    bytes (pydantic's JSON parser) rather than through FastAPI's body handling,
+    with the same problem+json answer for invalid input.
+    """
+    try:
+        target = TargetSpec.model_validate_json(await request.body())
+    except ValidationError as exc:
+        raise RequestValidationError(exc.errors(include_url=False)) from None
+    service: FleetService = request.app.state.fleets
+    body = target.model_dump(mode="json") if idempotency_key is not None else None
+    results, _ = await _committed(service, fleet_id, [target], idempotency_key, body)
     TARGETS_APPLIED.inc()
     return Response(results[0], media_type="application/json")
 
@@ -56,17 +98,11 @@ async def post_target_batch(
     idempotency_key: IdempotencyKey = None,
 ) -> Response:
     """Serve a list of targets in order, in one transaction."""
-    results, version = await run_in_threadpool(
-        lambda: service.post_targets(
-            fleet_id,
-            batch.targets,
-            idempotency_key=idempotency_key,
-            body=batch.model_dump(mode="json"),
-        )
-    )
+    body = batch.model_dump(mode="json") if idempotency_key is not None else None
+    results, version = await _committed(service, fleet_id, batch.targets, idempotency_key, body)
     TARGETS_APPLIED.inc(len(results))
-    body = '{"version":' + str(version) + ',"results":[' + ",".join(results) + "]}"
-    return Response(body, media_type="application/json")
+    answer = '{"version":' + str(version) + ',"results":[' + ",".join(results) + "]}"
+    return Response(answer, media_type="application/json")
 
 
 @router.post("/assign")

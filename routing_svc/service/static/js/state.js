@@ -5,8 +5,9 @@
  * counts), the fleet itself (vehicles and their reference positions) and the
  * events up to V (recent history: trails, targets, the running means, which
  * are reconstructed backwards from the mean at V). Events after V then arrive
- * live and are applied in order. Applying a target event sets the moved
- * vehicle to the event's `new_position`, so seeing an event twice is harmless.
+ * live and are applied in order. Applying a target event sets the vehicles the
+ * backward probe moved to their `backed_off` positions and the moved vehicle to
+ * the event's `new_position`, so seeing an event twice is harmless.
  */
 
 export const TRAIL_POINTS = 40;
@@ -86,6 +87,10 @@ export class FleetState {
       if (window.length === Math.min(this.window, n)) {
         push(this.series.recent, [n, window.reduce((a, b) => a + b, 0) / window.length], SERIES_POINTS);
       }
+      for (const back of r.backed_off || []) {
+        const vehicle = this.vehicles.get(back.vehicle);
+        if (vehicle) this.addTrailPoint(vehicle, back.position.x, back.position.y);
+      }
       const mover = this.vehicles.get(r.moved);
       if (mover) {
         push(this.series.step, [n, r.step_size, mover.type], SERIES_POINTS);
@@ -150,6 +155,14 @@ export class FleetState {
     push(this.series.mean, [n, this.costSum / n], SERIES_POINTS);
     const recentMean = this.recentCosts.reduce((a, b) => a + b, 0) / this.recentCosts.length;
     if (this.recentCosts.length === Math.min(this.window, n)) push(this.series.recent, [n, recentMean], SERIES_POINTS);
+    for (const back of r.backed_off || []) {
+      const vehicle = this.vehicles.get(back.vehicle);
+      if (!vehicle) continue;
+      vehicle.x = back.position.x;
+      vehicle.y = back.position.y;
+      this.addTrailPoint(vehicle, vehicle.x, vehicle.y);
+      this.dirty.add(vehicle.id);
+    }
     const mover = this.vehicles.get(r.moved);
     if (mover) {
       mover.x = r.new_position.x;
