@@ -205,6 +205,17 @@ def _verdicts(result: CosimResult) -> list[str]:
     return out
 
 
+def _served_pairs(runs: list[Any]) -> list[tuple[Any, float]]:
+    """Per served request of ``runs``: the service's prediction and SUMO's wait."""
+    return [
+        (p, w)
+        for run in runs
+        if run.predicted
+        for p, (_, w, ok) in zip(run.predicted, run.waits, strict=True)
+        if ok and math.isfinite(p[0])
+    ]
+
+
 def _decomposition(result: CosimResult) -> list[str]:
     """Where the measured wait comes from, for the policies the service dispatches."""
     lines = [
@@ -213,13 +224,7 @@ def _decomposition(result: CosimResult) -> list[str]:
         "|---|---|---|---|---|",
     ]
     for name, runs in result.by_policy().items():
-        pairs = [
-            (p, w)
-            for run in runs
-            if run.predicted
-            for p, (_, w, ok) in zip(run.predicted, run.waits, strict=True)
-            if ok and math.isfinite(p[0])
-        ]
+        pairs = _served_pairs(runs)
         if not pairs:
             continue
         direct = [(p[0], w) for p, w in pairs if not p[1]]
@@ -235,7 +240,15 @@ def _decomposition(result: CosimResult) -> list[str]:
 
 def _fixed_point(result: CosimResult, *, targets: int = 2000) -> list[str]:
     """Feed the SA (no SUMO) targets of the true demand, starting at the p-median."""
-    from routing_svc.sa import ROUTING, Constant, Fleet, FleetConfig, Vehicle, default_schedule
+    from routing_svc.sa import (
+        ROUTING,
+        Constant,
+        Fleet,
+        FleetConfig,
+        Vehicle,
+        default_probe,
+        default_schedule,
+    )
     from routing_svc.sim.scenario import expected_wait
 
     prepared = result.prepared
@@ -246,26 +259,29 @@ def _fixed_point(result: CosimResult, *, targets: int = 2000) -> list[str]:
     space = prepared.space
     network = prepared.network
     at_ends = sum(1 for p in best.positions if p.offset >= float(network.length[p.edge]) - 1e-9)
+    n = len(best.positions)
+    default = default_schedule(typical_cost=space.typical_cost(), n_vehicles=n, power=1.0)
+    window = default_probe(typical_cost=space.typical_cost(), n_vehicles=n)
     schedules = {
-        "the service's default step": default_schedule(
-            typical_cost=space.typical_cost(), n_vehicles=len(best.positions), power=1.0
-        ),
-        "a constant step of 0.1 s (about 1 m)": Constant(0.1),
+        "paper's rule, the service's default step": (default, None),
+        "paper's rule, a constant step of 0.1 s (about 1 m)": (Constant(0.1), None),
+        "with the probe (the service's default)": (default, window),
+        "with the probe, a constant step of 0.1 s": (Constant(0.1), window),
     }
     marks = [0, 10, 100, 500, targets]
     lines = [
-        f"{at_ends} of the {len(best.positions)} optimum sites are at the end of an edge.",
+        f"{at_ends} of the {n} optimum sites are at the end of an edge (step counters start at 0).",
         "",
         "| SA step | " + " | ".join(f"{k} targets" for k in marks) + " |",
         "|---|" + "---|" * len(marks),
     ]
-    for label, schedule in schedules.items():
+    for label, (schedule, probe) in schedules.items():
         values: dict[int, list[float]] = {k: [] for k in marks}
         for seed in (0, 1, 2):
             fleet = Fleet.create(
                 space,
                 [(Vehicle(f"v{i:03d}"), p) for i, p in enumerate(best.positions)],
-                FleetConfig(ROUTING, schedule, seed=seed),
+                FleetConfig(ROUTING, schedule, seed=seed, probe=probe),
             )
             values[0].append(expected_wait(space, fleet.state.positions, demand))
             stream = demand.sample(np.random.default_rng([seed, 9]), targets)
@@ -377,10 +393,14 @@ from that command. Figures: `docs/figures/cosim/`, all summaries:
     request (`POST .../targets`, the SA update), dispatches it with
     `dispatchTaxi` (SUMO dispatch algorithm `traci`); if it is busy, the closest idle
     vehicle by SUMO's routing goes (a *fallback*). After the drop-off the vehicle
-    drives back to its current reference position and parks. Before the run, the fleet
-    learns from {history} historical requests (persons: drawn from the same
-    distribution; incidents: recorded in another traffic realisation).
-  - `sa-cold`: the same without history; it starts learning with the run.
+    drives back to its current reference position and parks. The fleet starts at the
+    p-median of {history} historical requests (persons: drawn from the same
+    distribution; incidents: recorded in another traffic realisation), the paper's
+    deterministic first configuration, and the SA refines it with every request
+    (the service's defaults: step `a / (k + 1)^0.75` with counters started at the
+    historical requests each vehicle serves, and the backward probe, window 0.05 R).
+  - `sa-cold`: the same without history: it starts at the start positions and
+    learns from the run alone.
   - `static`: the same dispatch, reference positions frozen at the start positions
     (random edges, drawn uniformly by length; shared by `sa`, `sa-cold`, `static` and
     SUMO's policies).
@@ -478,13 +498,7 @@ def _facts(result: CosimResult) -> dict[str, Any]:
                 end = np.mean([c[-1][1] for c in curves])
                 facts["tracking"][name] = [float(before), float(after), float(end)]
     for name, runs in result.by_policy().items():
-        pairs = [
-            (p, w)
-            for run in runs
-            if run.predicted
-            for p, (_, w, ok) in zip(run.predicted, run.waits, strict=True)
-            if ok and math.isfinite(p[0])
-        ]
+        pairs = _served_pairs(runs)
         if pairs:
             direct = [(p[0], w) for p, w in pairs if not p[1]]
             facts["fallback_share"][name] = sum(1 for p, _ in pairs if p[1]) / len(pairs)
@@ -633,9 +647,8 @@ def _tracking_note(facts: dict[str, dict[str, Any]]) -> str:
         f"  {floor[2]:.1f} s). The floored step\n"
         f"  recovers {floor[1] - floor[2]:.1f} s in the second hour against {sa[1] - sa[2]:.1f} s\n"
         "  for the decreasing step, whose steps are already small after the history; the\n"
-        "  price of the floor is a noisier configuration before the move. Neither gets near\n"
-        "  the new optimum within the hour, for the reason above (the p-median is not a\n"
-        "  fixed point of the rule on this network)."
+        "  price of the floor is a noisier configuration before the move (the optimum\n"
+        "  before and after the move is in the tracking table)."
     )
 
 
@@ -675,20 +688,16 @@ NOTES = """## What the numbers say (and where the targets are not met)
 
 - **`sa` against `optimum` (target: within 10%).** {versus_opt} Where `sa` is
   farther, two reasons are measured here:
-  1. *The SA does not reach the p-median.* The exact expected free-flow wait of the
-     `sa` reference positions at the end of the runs is {gap_expected} above the
-     p-median's (tables: "expected free-flow wait at end"). The tables "Is the p-median
-     a fixed point of the SA?" run the SA alone, without SUMO, started *at* the
-     p-median: it leaves it within a few targets and settles well above it, even
-     with a constant step of about a metre per target. On a directed road network
-     the expected wait is discontinuous at junctions: most p-median sites are at the
-     end of an edge, where every outgoing direction is open; any step toward a
-     target, however small, carries the vehicle onto one outgoing edge, after which
-     every other direction needs a detour. The stochastic (sub)gradient rule of the
-     paper assumes a continuous objective, so it keeps leaving such points and does
-     not converge to them. This is a property of the SA core and the road-network
-     space (`routing_svc/sa`, `routing_svc/network`), not of the co-simulation; it is
-     reported to their owners rather than patched here.
+  1. *Where the references are.* The exact expected free-flow wait of the `sa`
+     reference positions at the end of the runs is {gap_expected} against the true
+     p-median's (tables: "expected free-flow wait at end"; for incidents the p-median
+     is the hindsight one of the realised incidents). On a directed road network the
+     expected wait jumps where a reference passes a target or gives up the turns of a
+     junction, which the paper's step does not see; the tables "Is the p-median a
+     fixed point of the SA?" run the SA alone, without SUMO, from the p-median, with
+     the paper's rule and with the service's backward probe that estimates that jump
+     term. `sa-cold` shows what the SA reaches from the start positions without a
+     first configuration.
   2. *Busy vehicles.* The service chooses by reference position, ignoring where
      vehicles are now. When the chosen vehicle is busy another one goes (a fallback,
      from wherever it is): {share_sa} of `sa`'s requests against {share_opt} of
@@ -696,8 +705,8 @@ NOTES = """## What the numbers say (and where the targets are not met)
      leaves others where demand is thin, so its chosen vehicle is busy more often.
   3. *Stranded vehicles.* A vehicle that starts where it is never the nearest to a
      request is never chosen and never moves (the "dead unit" of online k-means):
-     {never_moved} of `sa`'s vehicles ended exactly where they started, after the
-     history and the two hours (positions figures: circles without an arrow).
+     {never_moved} of `sa`'s vehicles ended exactly where they started the two hours
+     (positions figures: circles without an arrow).
 - **Much of the measured wait is not about positions.** Even when the chosen vehicle
   went, SUMO's wait exceeds the service's free-flow estimate by {overhead} s on average
   (per experiment and policy): leaving the parking place, accelerating, traffic lights

@@ -167,6 +167,8 @@ class FleetDispatcher:
         position = {"edge": reservation.from_edge, "offset": reservation.from_pos}
         if self.learn:
             answer = self.client.post_target(self.fleet_id, position)
+            for moved_back in answer.get("backed_off", ()):
+                self.references[str(moved_back["vehicle"])] = _position(moved_back["position"])
             self.references[str(answer["moved"])] = _position(answer["new_position"])
         else:
             answer = self.client.assign(self.fleet_id, position)

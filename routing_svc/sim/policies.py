@@ -3,8 +3,10 @@
 ==================  ==========================================================
 ``sa``              this product: the service chooses the vehicle whose
                     reference position is closest and moves it (SA update);
-                    trained first on the historical requests, if any.
-``sa-cold``         the same without history: learning starts with the run.
+                    starting at the p-median of the historical requests, if
+                    any (the paper's deterministic first configuration).
+``sa-cold``         the same without history: it starts at the start
+                    positions and learning starts with the run.
 ``sa-floor``        ``sa`` with a floored, asymptotically constant step
                     (for tracking demand that moves).
 ``static``          the service chooses, reference positions frozen at the
@@ -51,7 +53,7 @@ class Policy:
     floor : bool
         Whether the SA step has a floor (tracking).
     history : bool
-        Whether the fleet learns from the historical requests before the run.
+        Whether the fleet starts at the p-median of the historical requests.
     """
 
     name: str

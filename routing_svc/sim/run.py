@@ -76,7 +76,8 @@ class PolicyJob:
     step : Mapping, optional
         The fleet's step schedule (``None``: the service's default).
     history : tuple of (edge, offset)
-        Historical requests posted as targets before the simulation starts.
+        Historical requests: the fleet starts at their p-median (else at the
+        vehicles' start positions).
     traffic_period : float, optional
         Push SUMO's live edge travel times every this many seconds.
     service_url : str, optional
@@ -167,17 +168,29 @@ def _close(client: FleetClient) -> None:
 
 
 def _fleet_spec(job: PolicyJob, network_id: str, fleet_id: str) -> dict[str, Any]:
-    return {
+    """The fleet of a policy the service dispatches.
+
+    With history, the fleet starts at the p-median of the historical requests
+    (the paper's deterministic first configuration, which the SA then
+    refines); otherwise at the vehicles' start positions.
+    """
+    spec: dict[str, Any] = {
         "id": fleet_id,
         "network": network_id,
         "cost": job.cost,
         "objective": "routing",
         "step": dict(job.step) if job.step is not None else None,
         "seed": job.seed,
-        "vehicles": [
-            {"id": v.id, "position": {"edge": v.edge, "offset": v.offset}} for v in job.vehicles
-        ],
     }
+    if job.history:
+        sample = [{"edge": edge, "offset": offset} for edge, offset in job.history]
+        spec["vehicles"] = [{"id": v.id} for v in job.vehicles]
+        spec["start"] = {"optimum": {"sample": sample}}
+    else:
+        spec["vehicles"] = [
+            {"id": v.id, "position": {"edge": v.edge, "offset": v.offset}} for v in job.vehicles
+        ]
+    return spec
 
 
 def _free_flow_times(net: Path) -> dict[str, float]:
@@ -242,8 +255,6 @@ def run_policy(job: PolicyJob) -> PolicyRun:
         if client is not None:
             network_id = str(client.add_network(job.net, name=_network_id(job.net))["id"])
             client.create_fleet(_fleet_spec(job, network_id, fleet_id))
-            for edge, offset in job.history:
-                client.post_target(fleet_id, {"edge": edge, "offset": offset})
         backend.start(options)
         if client is not None:
             dispatcher = FleetDispatcher(
