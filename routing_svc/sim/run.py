@@ -232,29 +232,31 @@ def run_policy(job: PolicyJob) -> PolicyRun:
     """Run one policy in SUMO and read what SUMO measured."""
     job.workdir.mkdir(parents=True, exist_ok=True)
     name = job.policy.name
-    lengths = _edge_lengths(job.net, [v.edge for v in job.vehicles])
     by_service = job.policy.dispatch == "service"
-    fleet_file = write_fleet(
-        job.workdir / f"fleet-{name}.rou.xml", job.vehicles, lengths=lengths, park=by_service
-    )
     tripinfo = job.workdir / f"tripinfo-{name}.xml"
-    options = sumo_options(
-        net=job.net,
-        routes=[*job.routes, fleet_file],
-        end=job.end,
-        seed=job.seed,
-        tripinfo=tripinfo,
-        dispatch="traci" if by_service else "greedy",
-        idle=job.policy.idle,
-    )
     backend = make_backend(job.backend, gui=job.gui)
     client = open_client(job.service_url) if by_service else None
     fleet_id = f"cosim-{name}-{job.seed}-{uuid.uuid4().hex[:8]}"
     dispatcher: FleetDispatcher | None = None
     try:
+        vehicles = job.vehicles
         if client is not None:
             network_id = str(client.add_network(job.net, name=_network_id(job.net))["id"])
             client.create_fleet(_fleet_spec(job, network_id, fleet_id))
+            vehicles = _inserted_at_references(client.get_fleet(fleet_id), job.vehicles)
+        lengths = _edge_lengths(job.net, [v.edge for v in vehicles])
+        fleet_file = write_fleet(
+            job.workdir / f"fleet-{name}.rou.xml", vehicles, lengths=lengths, park=by_service
+        )
+        options = sumo_options(
+            net=job.net,
+            routes=[*job.routes, fleet_file],
+            end=job.end,
+            seed=job.seed,
+            tripinfo=tripinfo,
+            dispatch="traci" if by_service else "greedy",
+            idle=job.policy.idle,
+        )
         backend.start(options)
         if client is not None:
             dispatcher = FleetDispatcher(
@@ -287,6 +289,25 @@ def run_policy(job: PolicyJob) -> PolicyRun:
                 client.delete_fleet(fleet_id)
             _close(client)
     return _result(job, tripinfo, dispatcher, wall)
+
+
+def _inserted_at_references(
+    fleet: Mapping[str, Any], vehicles: Sequence[FleetVehicle]
+) -> tuple[FleetVehicle, ...]:
+    """The SUMO vehicles of a service fleet, inserted at the fleet's reference positions.
+
+    A fleet that starts from the p-median of its history has references other
+    than the job's start positions; its vehicles begin the run parked there,
+    exactly like the ``optimum`` policy's vehicles at their sites, so the
+    policies differ in where their references go and not in a first drive.
+    """
+    references = {
+        str(v["id"]): (str(v["position"]["edge"]), float(v["position"]["offset"]))
+        for v in fleet["vehicles"]
+    }
+    return tuple(
+        FleetVehicle(v.id, *references[v.id]) if v.id in references else v for v in vehicles
+    )
 
 
 def _edge_lengths(net: Path, edges: Sequence[str]) -> dict[str, float]:

@@ -79,6 +79,32 @@ def test_sa_moves_reference_positions_and_frozen_policies_do_not(
     assert len(optimum.snapshots[0][1]) == len(best.positions) == 4
 
 
+def _inserted(fleet_file: Path) -> dict[str, str]:
+    """Each fleet vehicle's insertion edge, read from the route file SUMO loaded."""
+    root = ElementTree.parse(fleet_file).getroot()
+    edges = {}
+    for vehicle in root.iter("vehicle"):
+        route = vehicle.find("route")
+        assert route is not None
+        edges[vehicle.get("id")] = route.get("edges")
+    return edges
+
+
+def test_sumo_vehicles_start_at_the_fleets_first_references(
+    persons_result: CosimResult,
+) -> None:
+    runs = persons_result.by_policy()
+    (sa,) = runs["sa"]
+    (cold,) = runs["sa-cold"]
+    # sa starts at the p-median of its history, sa-cold at the common start positions
+    assert sa.snapshots[0][1] != cold.snapshots[0][1]
+    for name in SERVICE_POLICIES:
+        (run,) = runs[name]
+        fleet_file = Path(run.tripinfo).parent / f"fleet-{name}.rou.xml"
+        first = {vehicle: edge for vehicle, (edge, _) in run.snapshots[0][1].items()}
+        assert _inserted(fleet_file) == first, name
+
+
 def test_objective_curves_against_the_optimum(persons_result: CosimResult) -> None:
     best = persons_result.optimum[3]
     assert best is not None and best.expected_cost > 0.0
