@@ -14,6 +14,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from routing_svc import __version__
 from routing_svc.errors import Conflict, StorageError
 from routing_svc.service.demo import ensure_demo_fleet, feed_demo_targets
+from routing_svc.service.fastpath import TargetFastPath
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.guards import Guards
 from routing_svc.service.networks import NetworkRegistry
@@ -98,6 +99,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         dashboard.router,
     ):
         app.include_router(router)
+    if settings.target_fast_path:
+        app.add_middleware(TargetFastPath)  # directly inside the guards
     app.add_middleware(
         Guards,
         max_body_bytes=settings.max_body_bytes,

@@ -34,6 +34,10 @@ class Settings(BaseSettings):
         Targets per second that the demo feeder posts to the demo fleet (0: off).
     recent_window : int
         How many recent targets the "recent" mean cost covers.
+    target_fast_path : bool
+        Serve ``POST /v1/fleets/{id}/targets`` from the ASGI layer for valid
+        bodies (:mod:`routing_svc.service.fastpath`); off, FastAPI's route serves
+        every request. The answers are the same bytes either way.
     """
 
     model_config = SettingsConfigDict(
@@ -53,3 +57,4 @@ class Settings(BaseSettings):
     demo_fleet: bool = False
     demo_rate: float = 0.0
     recent_window: int = 200
+    target_fast_path: bool = True

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Sequence
+from collections.abc import Callable
 from concurrent.futures import Future
+from functools import partial
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Header, Request, Response
@@ -34,23 +35,27 @@ TARGET_RESPONSE: dict[int | str, dict[str, Any]] = {
 }
 
 
+def submit_target(
+    service: FleetService, fleet_id: str, target: TargetSpec, idempotency_key: str | None
+) -> Future[tuple[list[str], int]]:
+    """Queue one target of the single-target route for the service's writer.
+
+    Its ``Idempotency-Key`` digest covers the target as JSON. Raises (and
+    queues nothing) when the target's position is invalid.
+    """
+    body = target.model_dump(mode="json") if idempotency_key is not None else None
+    return service.submit_targets(fleet_id, [target], idempotency_key=idempotency_key, body=body)
+
+
 async def _committed(
-    service: FleetService,
-    fleet_id: str,
-    targets: Sequence[TargetSpec],
-    idempotency_key: str | None,
-    body: Any,
+    service: FleetService, fleet_id: str, submit: Callable[[], Future[tuple[list[str], int]]]
 ) -> tuple[list[str], int]:
-    """Queue the targets for the service's writer and wait for the commit.
+    """Queue a request (``submit``) and wait for its commit.
 
     The event loop only resolves the positions and queues the request when the
     fleet is in memory; a fleet that must first be read from the database is
     queued from a worker thread.
     """
-
-    def submit() -> Future[tuple[list[str], int]]:
-        return service.submit_targets(fleet_id, targets, idempotency_key=idempotency_key, body=body)
-
     future = submit() if service.is_cached(fleet_id) else await run_in_threadpool(submit)
     return await asyncio.wrap_future(future)
 
@@ -84,8 +89,9 @@ async def post_target(
     except ValidationError as exc:
         raise RequestValidationError(exc.errors(include_url=False)) from None
     service: FleetService = request.app.state.fleets
-    body = target.model_dump(mode="json") if idempotency_key is not None else None
-    results, _ = await _committed(service, fleet_id, [target], idempotency_key, body)
+    results, _ = await _committed(
+        service, fleet_id, partial(submit_target, service, fleet_id, target, idempotency_key)
+    )
     TARGETS_APPLIED.inc()
     return Response(results[0], media_type="application/json")
 
@@ -99,7 +105,10 @@ async def post_target_batch(
 ) -> Response:
     """Serve a list of targets in order, in one transaction."""
     body = batch.model_dump(mode="json") if idempotency_key is not None else None
-    results, version = await _committed(service, fleet_id, batch.targets, idempotency_key, body)
+    submit = partial(
+        service.submit_targets, fleet_id, batch.targets, idempotency_key=idempotency_key, body=body
+    )
+    results, version = await _committed(service, fleet_id, submit)
     TARGETS_APPLIED.inc(len(results))
     answer = '{"version":' + str(version) + ',"results":[' + ",".join(results) + "]}"
     return Response(answer, media_type="application/json")

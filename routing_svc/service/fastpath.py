@@ -1,0 +1,142 @@
+"""The hot route ``POST /v1/fleets/{id}/targets`` served straight from the ASGI layer.
+
+A target costs the service some tens of microseconds of search and update,
+while FastAPI's request machinery (routing, dependency resolution, exception
+middleware, response classes) costs several times that. This middleware sits
+directly inside :class:`~routing_svc.service.guards.Guards` (so the API key and
+the body limit apply unchanged) and answers the common case itself: a valid
+body for a fleet that is in memory. It parses the body with the same pydantic
+model, queues it exactly like the FastAPI route
+(:func:`~routing_svc.service.routes.targets.submit_target`) and answers with the
+same bytes.
+
+Everything else goes on to the FastAPI route, with the body replayed: an
+invalid body or header, a fleet that must first be read from the database,
+or an error raised before anything was queued. The route then answers as it
+always does (the same problem+json), and nothing was applied twice because
+nothing was applied yet. Domain errors that come back from the writer (an
+unreachable target, an idempotency key reused with another body) are answered
+here with the route's problem+json; the writer applied nothing for them.
+The route stays registered, so the OpenAPI document describes this path.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import re
+from typing import Any
+
+from prometheus_client import Counter
+from pydantic import ValidationError
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from routing_svc.errors import RoutingSvcError
+from routing_svc.service.fleets import FleetService
+from routing_svc.service.problems import problem, status_of
+from routing_svc.service.routes.targets import TARGETS_APPLIED, submit_target
+from routing_svc.service.schemas import TargetSpec
+
+TARGET_PATH = re.compile(r"/v1/fleets/([^/]+)/targets")
+"""The path of the single-target route (matched in full)."""
+
+IDEMPOTENCY_HEADER = b"idempotency-key"
+MAX_IDEMPOTENCY_KEY = 200
+"""The route's limit on the ``Idempotency-Key`` header (longer keys are a 422 there)."""
+
+_JSON_HEADERS = (b"content-type", b"application/json")
+
+FAST_PATH_ANSWERS = Counter(
+    "routing_svc_target_fast_path_total",
+    "Single-target requests answered by the ASGI fast path (the rest by the FastAPI route)",
+)
+
+
+class TargetFastPath:
+    """Serve valid single targets for cached fleets; pass every other request on."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope["method"] != "POST":
+            await self.app(scope, receive, send)
+            return
+        match = TARGET_PATH.fullmatch(scope["path"])
+        service: FleetService | None = getattr(scope["app"].state, "fleets", None)
+        if match is None or service is None or not service.is_cached(match.group(1)):
+            await self.app(scope, receive, send)
+            return
+        usable, key = _idempotency_key(scope)
+        body = await _read_body(receive)
+        if body is None:  # the client went away
+            return
+        replay = _replaying(body, receive)
+        if not usable:
+            await self.app(scope, replay, send)
+            return
+        try:
+            target = TargetSpec.model_validate_json(body)
+        except ValidationError:
+            await self.app(scope, replay, send)
+            return
+        try:
+            queued = asyncio.wrap_future(submit_target(service, match.group(1), target, key))
+        except RoutingSvcError:  # raised before anything was queued: the route answers
+            await self.app(scope, replay, send)
+            return
+        try:
+            results, _ = await queued
+        except RoutingSvcError as error:
+            response = problem(status_of(error), error.title, error.detail)
+            await response(scope, replay, send)
+            FAST_PATH_ANSWERS.inc()
+            return
+        TARGETS_APPLIED.inc()
+        FAST_PATH_ANSWERS.inc()
+        answer = results[0].encode()
+        await send(
+            {
+                "type": "http.response.start",
+                "status": 200,
+                "headers": [(b"content-length", str(len(answer)).encode()), _JSON_HEADERS],
+            }
+        )
+        await send({"type": "http.response.body", "body": answer})
+
+
+def _idempotency_key(scope: Scope) -> tuple[bool, str | None]:
+    """Whether the route would accept the request's ``Idempotency-Key`` (it rejects an
+    empty or too long key, and this path leaves a repeated header to it), and the key
+    (``None`` without one)."""
+    values = [value for name, value in scope["headers"] if name == IDEMPOTENCY_HEADER]
+    if not values:
+        return True, None
+    key = values[0].decode("latin-1")
+    return len(values) == 1 and 1 <= len(key) <= MAX_IDEMPOTENCY_KEY, key
+
+
+async def _read_body(receive: Receive) -> bytes | None:
+    """The whole request body, or ``None`` if the client disconnected."""
+    chunks: list[bytes] = []
+    while True:
+        message = await receive()
+        if message["type"] == "http.disconnect":
+            return None
+        chunks.append(message.get("body", b""))
+        if not message.get("more_body", False):
+            return b"".join(chunks)
+
+
+def _replaying(body: bytes, receive: Receive) -> Receive:
+    """A ``receive`` that gives ``body`` once more, then what ``receive`` gives."""
+    delivered = False
+
+    async def replay() -> Message:
+        nonlocal delivered
+        if not delivered:
+            delivered = True
+            message: dict[str, Any] = {"type": "http.request", "body": body, "more_body": False}
+            return message
+        return await receive()
+
+    return replay
