@@ -136,6 +136,12 @@ class CompiledNetwork:
         """Number of edges (graph nodes)."""
         return len(self.edge_ids)
 
+    @cached_property
+    def length_values(self) -> list[float]:
+        """``length`` as a list of Python floats, for per-position checks in Python code
+        (indexing a list is several times cheaper than indexing an array)."""
+        return [float(v) for v in self.length.tolist()]
+
     @property
     def n_junctions(self) -> int:
         """Number of junctions that kept edges touch."""

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Literal
 
 import numpy as np
@@ -55,6 +56,11 @@ class EdgeCosts:
     kind: CostKind
     cost: FloatArray
     rate: FloatArray
+
+    @cached_property
+    def rate_values(self) -> list[float]:
+        """``rate`` as a list of Python floats, for per-position arithmetic in Python code."""
+        return [float(v) for v in self.rate.tolist()]
 
     @classmethod
     def free_flow(cls, network: CompiledNetwork, kind: CostKind) -> EdgeCosts:
@@ -102,6 +108,13 @@ class EdgeCosts:
 def check_position(network: CompiledNetwork, position: NetPosition, *, what: str) -> None:
     """Raise :class:`InvalidInput` unless ``position`` lies on the network."""
     edge, offset = position
+    if (
+        type(edge) is int
+        and type(offset) is float
+        and 0 <= edge < len(network.edge_ids)
+        and 0.0 <= offset <= network.length_values[edge]  # false for NaN
+    ):
+        return
     if isinstance(edge, bool) or not isinstance(edge, int | np.integer):
         raise InvalidInput(f"{what}: edge index must be an integer")
     if not 0 <= edge < network.n_edges:

@@ -37,7 +37,7 @@ from routing_svc.network.search import (
     search_arcs,
 )
 from routing_svc.network.snapping import point_on_edge
-from routing_svc.network.twins import reverse_edges, twin, twin_columns
+from routing_svc.network.twins import reverse_edges, twin, with_twins
 from routing_svc.network.walking import check_route, random_walk, walk_route
 from routing_svc.sa.space import Assignment, FloatArray, IntArray, Requirement
 from routing_svc.types import NetPosition
@@ -197,12 +197,10 @@ class RoadSpace:
         if speed.shape != (len(positions),):
             raise InvalidInput("speeds must hold one value per vehicle")
         n = len(positions)
-        if self.either_way and n and _on_network(net, edges, offsets):
-            twin_edges, twin_offsets = twin_columns(net, edges, offsets)
-            edges = np.concatenate([edges, twin_edges])
-            offsets = np.concatenate([offsets, twin_offsets])
-            speed = np.concatenate([speed, speed])
-            groups = np.concatenate([groups, groups])
+        if self.either_way and n:
+            edges, offsets, speed, groups = with_twins(
+                reverse_edges(net), net.length, edges, offsets, speed, groups
+            )
         buffers = self._buffers.get()
         classes = net.end_classes
         found = nearest_vehicles(
@@ -321,18 +319,23 @@ class RoadSpace:
         edge the reference came from (that junction, with that edge's turns);
         else (entry unknown) the start of its edge.
         """
-        edges, offsets = fleet_columns(positions)
-        if not _on_network(self.network, edges, offsets):
-            for position in positions:
-                check_position(self.network, position, what="position")
-        rate = self._costs.rate[edges]
-        behind = (offsets - window / rate).tolist()
-        room = (offsets * rate > window).tolist()
+        network = self.network
+        rate = self._costs.rate_values
+        length = network.length_values
+        n_edges = len(length)
         probes: list[NetPosition] = []
-        for i, edge in enumerate(edges.tolist()):
-            entry = entries[i]
-            if room[i]:
-                probes.append(NetPosition(edge, behind[i]))
+        for position, entry in zip(positions, entries, strict=True):
+            edge, offset = position
+            if not (
+                type(edge) is int
+                and type(offset) is float
+                and 0 <= edge < n_edges
+                and 0.0 <= offset <= length[edge]
+            ):
+                check_position(network, position, what="position")
+            edge_rate = rate[edge]
+            if offset * edge_rate > window:
+                probes.append(NetPosition(edge, offset - window / edge_rate))
             else:
                 probes.append(entry if entry is not None else NetPosition(edge, 0.0))
         return probes
@@ -473,15 +476,6 @@ class RoadSpace:
         x, y = self.xy(position)
         lon, lat = projection.to_lonlat(x, y)
         return float(lon), float(lat)
-
-
-def _on_network(network: CompiledNetwork, edges: IntArray, offsets: FloatArray) -> bool:
-    """Whether every position lies on the network (else the search names the bad one)."""
-    inside = (edges >= 0) & (edges < network.n_edges)
-    if not inside.all():
-        return False
-    lengths = network.length[edges]
-    return bool(((offsets >= 0.0) & (offsets <= lengths)).all())
 
 
 def _requirement_arrays(requirement: Requirement, n_vehicles: int) -> tuple[IntArray, IntArray]:

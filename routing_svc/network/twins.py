@@ -16,6 +16,7 @@ import functools
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from routing_svc.network.compile import CompiledNetwork
 from routing_svc.types import NetPosition
@@ -62,3 +63,47 @@ def twin(network: CompiledNetwork, position: NetPosition) -> NetPosition | None:
     if edges[0] < 0:
         return None
     return NetPosition(int(edges[0]), float(offsets[0]))
+
+
+@njit(cache=True)
+def with_twins(
+    rev: IntArray,
+    length: FloatArray,
+    edges: IntArray,
+    offsets: FloatArray,
+    speeds: FloatArray,
+    groups: IntArray,
+) -> tuple[IntArray, FloatArray, FloatArray, IntArray]:
+    """The vehicle columns followed by their twins, as the search takes them.
+
+    Entry ``n + i`` is the twin of vehicle ``i`` (same speed and group), with
+    edge ``-1`` where there is none: on a one-way street, or where the
+    position itself is not on the network (the search then reports that
+    vehicle). Twin offsets are those of :func:`twin_columns`.
+    """
+    n = edges.shape[0]
+    n_edges = length.shape[0]
+    out_edges = np.empty(2 * n, dtype=np.int64)
+    out_offsets = np.empty(2 * n)
+    out_speeds = np.empty(2 * n)
+    out_groups = np.empty(2 * n, dtype=np.int64)
+    for i in range(n):
+        e = edges[i]
+        s = offsets[i]
+        out_edges[i] = e
+        out_offsets[i] = s
+        out_speeds[i] = speeds[i]
+        out_speeds[n + i] = speeds[i]
+        out_groups[i] = groups[i]
+        out_groups[n + i] = groups[i]
+        r = -1
+        if 0 <= e < n_edges and 0.0 <= s <= length[e]:
+            r = rev[e]
+        out_edges[n + i] = r
+        if r >= 0:
+            twin_length = length[r]
+            at = (1.0 - s / length[e]) * twin_length
+            out_offsets[n + i] = min(max(at, 0.0), twin_length)
+        else:
+            out_offsets[n + i] = 0.0
+    return out_edges, out_offsets, out_speeds, out_groups
