@@ -152,6 +152,17 @@ class Outcome(Generic[P]):
 
 
 @dataclass
+class _ProbeCache(Generic[P]):
+    """The back probes of :meth:`Fleet._probe` and the references they were taken at."""
+
+    space: object
+    window: float
+    positions: list[P]
+    entries: list[P | None]
+    probes: list[P]
+
+
+@dataclass
 class Fleet(Generic[P]):
     """Vehicles, their reference positions and the rule that moves them.
 
@@ -165,6 +176,7 @@ class Fleet(Generic[P]):
     _speeds: np.ndarray = field(init=False, repr=False)
     _types: tuple[str, ...] = field(init=False, repr=False)
     _index: dict[str, int] = field(init=False, repr=False)
+    _probe_cache: _ProbeCache[P] | None = field(init=False, repr=False, default=None)
 
     def __post_init__(self) -> None:
         if not self.vehicles:
@@ -298,7 +310,7 @@ class Fleet(Generic[P]):
         part of the gradient, the probe the backward jump.
         """
         positions, entries = self.state.positions, self.state.entries
-        probes = space.back_probes(positions, window, entries)
+        probes = self._back_probes(space, window)
         # only a probe that arrives before the fleet matters: the search stops there
         times = space.arrival_times(target, probes, self._speeds, cost)
         backed_off: list[tuple[int, P]] = []
@@ -312,6 +324,21 @@ class Fleet(Generic[P]):
             positions[j] = moved
             backed_off.append((j, moved))
         return backed_off
+
+    def _back_probes(self, space: DirectedSpace[P], window: float) -> list[P]:
+        """``space.back_probes`` of the current references, recomputed only for the
+        vehicles whose reference or entry changed since the last call."""
+        positions, entries = self.state.positions, self.state.entries
+        cache = self._probe_cache
+        if cache is None or cache.space is not space or cache.window != window:
+            probes = space.back_probes(positions, window, entries)
+            self._probe_cache = _ProbeCache(space, window, list(positions), list(entries), probes)
+            return list(probes)
+        for j, (position, entry) in enumerate(zip(positions, entries, strict=True)):
+            if position is not cache.positions[j] or entry is not cache.entries[j]:
+                (cache.probes[j],) = space.back_probes([position], window, [entry])
+                cache.positions[j], cache.entries[j] = position, entry
+        return list(cache.probes)
 
     def snapshot(self) -> dict[str, Any]:
         """JSON-ready state (floats round-trip exactly through ``json``)."""

@@ -210,6 +210,31 @@ def test_same_seed_same_targets_bit_identical(
     assert any(e is not None for e in one.state.entries) or annealing is not None
 
 
+@pytest.mark.parametrize("annealing", [None, Annealing(5.0, 0.99)])
+def test_kept_back_probes_are_those_of_the_current_references(
+    network: CompiledNetwork, space: RoadSpace, annealing: Annealing | None
+) -> None:
+    # the fleet recomputes only the probes of vehicles that moved; a fleet that forgets
+    # them before every target must take exactly the same steps
+    config = _config(probe=10.0, annealing=annealing)
+    kept = _run(space, config, [])
+    fresh = _run(space, config, [])
+    slower = RoadSpace(network, cost="time").with_travel_times({"b": 30.0, "d": 5.0})
+    for k, z in enumerate(_stream(network, 3, 400)):
+        if k == 200:  # new travel times: every probe window is measured anew
+            kept.space = fresh.space = slower
+        fresh._probe_cache = None
+        assert isinstance(kept.space, RoadSpace)
+        state = kept.state
+        expected = kept.space.back_probes(state.positions, 10.0, state.entries)
+        assert kept._back_probes(kept.space, 10.0) == expected
+        one, two = kept.observe(z), fresh.observe(z)
+        assert (one.new_position, one.backed_off) == (two.new_position, two.backed_off)
+        assert kept.state.positions == fresh.state.positions
+        assert kept.state.entries == fresh.state.entries
+    assert json.dumps(kept.snapshot()) == json.dumps(fresh.snapshot())
+
+
 def test_snapshot_restore_round_trip_with_entries(
     network: CompiledNetwork, space: RoadSpace
 ) -> None:
