@@ -11,6 +11,7 @@ a connection costs nothing. See :mod:`routing_svc.network.search`.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -240,8 +241,7 @@ class RoadSpace:
         not with the fleet: what :meth:`Fleet._probe` needs.
         """
         n = len(positions)
-        every = Requirement(np.arange(n, dtype=np.int64), np.ones(n, dtype=np.int64))
-        found = self._search(target, positions, speeds, every, cutoff)
+        found = self._search(target, positions, speeds, _each_its_own(n), cutoff)
         best_time, best_idx = found[4], found[6]
         times = np.full(n, np.inf)
         hit = (best_idx >= 0) & (best_time < cutoff)
@@ -476,6 +476,14 @@ class RoadSpace:
         x, y = self.xy(position)
         lon, lat = projection.to_lonlat(x, y)
         return float(lon), float(lat)
+
+
+@functools.lru_cache(maxsize=64)
+def _each_its_own(n: int) -> Requirement:
+    """The requirement of ``n`` vehicles each in a group of its own, one needed per group."""
+    groups = np.arange(n, dtype=np.int64)
+    counts = np.ones(n, dtype=np.int64)
+    return Requirement(groups, counts)
 
 
 def _requirement_arrays(requirement: Requirement, n_vehicles: int) -> tuple[IntArray, IntArray]:
