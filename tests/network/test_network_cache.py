@@ -97,11 +97,11 @@ def test_damaged_cache_is_rebuilt(oneway_path: Path, tmp_path: Path, damage: str
     elif damage == "wrong-array":
         arrays = read_npz(npz)
         arrays["length"] = arrays["length"].astype(np.float32)
-        np.savez(npz, **arrays)
+        np.savez(npz, **arrays)  # type: ignore[arg-type]
     else:
         arrays = read_npz(npz)
         arrays["fwd_indices"] = np.full_like(arrays["fwd_indices"], 10**6)
-        np.savez(npz, **arrays)
+        np.savez(npz, **arrays)  # type: ignore[arg-type]
     assert_same_network(fresh, load_network(oneway_path, cache_dir=tmp_path))
     assert_same_network(fresh, load_network(oneway_path, cache_dir=tmp_path))
 

@@ -27,7 +27,7 @@ def reference_times(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each vehicle's cost and time to ``target`` according to networkx."""
     ref = case.reference
-    start = ref.start_costs(case.ids(target), costs, weighted)  # type: ignore[arg-type]
+    start = ref.start_costs(case.ids(target), costs, weighted)
     cost = np.array(
         [ref.vehicle_cost(case.ids(p), case.ids(target), costs, start) for p in positions]
     )
@@ -223,7 +223,7 @@ def test_assign_is_pure_and_recovers_from_errors(drt_case: NetCase) -> None:
             b.mover,
             b.mover_cost,
         )
-        np.testing.assert_array_equal(a.route, b.route)  # type: ignore[arg-type]
+        np.testing.assert_array_equal(a.route, b.route)
 
 
 def chain_network() -> CompiledNetwork:
@@ -264,7 +264,7 @@ def test_unreachable_and_unmet_requirements() -> None:
     assert result.served_by == (0, 1)
     assert result.times == (100.0, 0.0)
     assert result.mover == 0
-    np.testing.assert_array_equal(result.route, [0, 1])  # type: ignore[arg-type]
+    np.testing.assert_array_equal(result.route, [0, 1])
     with pytest.raises(UnmetRequirement):
         space.assign(
             on_b, [on_a, on_b], np.ones(2), Requirement(np.array([0, -1]), np.array([1, 1]))

@@ -94,11 +94,11 @@ def test_kill_9_under_load_keeps_exactly_once(
             with lock:
                 seen = dict(acked)
             stored = stored_keys(sqlite_url)
-            applied = {key for keys in stored.values() for key in keys}
+            applied_keys = {key for keys in stored.values() for key in keys}
             for key, (fleet, seq) in seen.items():
                 assert stored[fleet].get(key) == seq, key
             # applied but not acknowledged: only the requests in flight at the kill
-            assert len(applied - set(seen)) <= len(FLEETS)
+            assert len(applied_keys - set(seen)) <= len(FLEETS)
             assert integrity(sqlite_url) == []
             replay(sqlite_url, tmp_path)
             t0 = time.monotonic()

@@ -252,7 +252,9 @@ def test_the_probe_is_on_by_default_and_can_be_turned_off(client: TestClient) ->
 
 def test_an_optimum_start_counts_the_sample_in_the_step_sizes(client: TestClient) -> None:
     rng = np.random.default_rng(12)
-    sample = [{"edge": edge(int(e)), "offset": 0.0} for e in rng.integers(NET.n_edges, size=60)]
+    sample: list[dict[str, Any]] = [
+        {"edge": edge(int(e)), "offset": 0.0} for e in rng.integers(NET.n_edges, size=60)
+    ]
     body = fleet_body(
         vehicles=[{"id": "a"}, {"id": "b"}, {"id": "c", "speed": 2.0}],
         start={"optimum": {"sample": sample}},

@@ -4,6 +4,7 @@ fleet that fails cannot fail another's requests (SQLite and PostgreSQL)."""
 from __future__ import annotations
 
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -21,7 +22,7 @@ from tests.service.test_durability import targets
 @pytest.fixture
 def client(db_url: str) -> Iterator[InProcessFleetClient]:
     with InProcessFleetClient(database_url=db_url) as opened:
-        opened.add_network(DRT, name="drt")
+        opened.add_network(Path(DRT), name="drt")
         for fleet_id in ("a", "b", "c"):
             opened.create_fleet(fleet_body(fleet_id))
         yield opened
@@ -55,7 +56,7 @@ def test_fleets_share_one_commit(client: InProcessFleetClient) -> None:
     assert [len(results) for results, _ in answers] == [2, 1, 1, 3]
     # the same targets applied serially to fresh fleets give the same events
     with InProcessFleetClient() as serial:
-        serial.add_network(DRT, name="drt")
+        serial.add_network(Path(DRT), name="drt")
         for fleet_id in ("a", "b", "c"):
             serial.create_fleet(fleet_body(fleet_id))
         for fleet_id, batch in work:
@@ -86,7 +87,7 @@ def test_a_failing_fleet_does_not_fail_the_others(client: InProcessFleetClient) 
 
 def test_close_commits_what_is_queued(db_url: str) -> None:
     client = InProcessFleetClient(database_url=db_url)
-    client.add_network(DRT, name="drt")
+    client.add_network(Path(DRT), name="drt")
     client.create_fleet(fleet_body("a"))
     service = client.service
     futures = submit_together(service, [("a", specs(8, 1)), ("a", specs(9, 2))])
