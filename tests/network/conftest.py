@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import subprocess
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -60,26 +61,24 @@ class NetCase:
         return self.network.edge_ids[position.edge], position.offset
 
 
-def generate_oneway_net(folder: Path) -> Path:
-    """A one-way-heavy random network made with SUMO's netgenerate."""
-    path = folder / "oneway.net.xml"
+def _netgenerate(path: Path, args: Sequence[str]) -> Path:
+    """Run SUMO's netgenerate with ``args``, writing ``path``."""
     subprocess.run(
-        [str(SUMO_HOME / "bin" / "netgenerate"), *ONEWAY_ARGS, "--output-file", str(path)],
+        [str(SUMO_HOME / "bin" / "netgenerate"), *args, "--output-file", str(path)],
         check=True,
         capture_output=True,
     )
     return path
+
+
+def generate_oneway_net(folder: Path) -> Path:
+    """A one-way-heavy random network made with SUMO's netgenerate."""
+    return _netgenerate(folder / "oneway.net.xml", ONEWAY_ARGS)
 
 
 def generate_grid_net(folder: Path) -> Path:
     """A 10 x 10 junction grid with every turn allowed, made with SUMO's netgenerate."""
-    path = folder / "grid.net.xml"
-    subprocess.run(
-        [str(SUMO_HOME / "bin" / "netgenerate"), *GRID_ARGS, "--output-file", str(path)],
-        check=True,
-        capture_output=True,
-    )
-    return path
+    return _netgenerate(folder / "grid.net.xml", GRID_ARGS)
 
 
 def generate_restricted_net(folder: Path) -> Path:
