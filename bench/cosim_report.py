@@ -396,7 +396,8 @@ from that command. Figures: `docs/figures/cosim/`, all summaries:
     drives back to its current reference position and parks. The fleet starts at the
     p-median of {history} historical requests (persons: drawn from the same
     distribution; incidents: recorded in another traffic realisation), the paper's
-    deterministic first configuration, and the SA refines it with every request
+    deterministic first configuration, where SUMO inserts its vehicles (as it inserts
+    `optimum`'s at its sites), and the SA refines it with every request
     (the service's defaults: step `a / (k + 1)^0.75` with counters started at the
     historical requests each vehicle serves, and the backward probe, window 0.05 R).
   - `sa-cold`: the same without history: it starts at the start positions and
@@ -432,8 +433,13 @@ from pathlib import Path
 from routing_svc.sim import CosimSpec, parse_policies, run_cosim
 from routing_svc.sim.plots import write_figures
 
-spec = CosimSpec(network="drt", vehicles=10, seeds=(0, 1, 2), history=1000,
-                 policies=parse_policies("sa,optimum,sumo-stop"))
+spec = CosimSpec(
+    network="drt",
+    vehicles=10,
+    seeds=(0, 1, 2),
+    history=1000,
+    policies=parse_policies("sa,optimum,sumo-stop"),
+)
 result = run_cosim(spec, out_dir=Path("out"))
 result.summary()["policies"]["sa"]["mean_wait_s"]
 write_figures(result, out_dir=Path("out"), prefix="cosim")
@@ -479,10 +485,8 @@ def _facts(result: CosimResult) -> dict[str, Any]:
             never = [
                 sum(
                     1
-                    for start, end in zip(
-                        result.start[r.seed], r.snapshots[-1][1].values(), strict=True
-                    )
-                    if tuple(start) == tuple(end)
+                    for vehicle, start in r.snapshots[0][1].items()
+                    if tuple(start) == tuple(r.snapshots[-1][1][vehicle])
                 )
                 for r in runs
                 if r.snapshots
@@ -559,6 +563,10 @@ def _notes(facts: dict[str, dict[str, Any]]) -> str:
         tracking=_tracking_note(facts),
         never_moved=_span(
             [f.get("never_moved", {}).get("sa", math.nan) / f["vehicles"] for f in main], ".0%"
+        ),
+        never_moved_cold=_span(
+            [f.get("never_moved", {}).get("sa-cold", math.nan) / f["vehicles"] for f in main],
+            ".0%",
         ),
         requests=f"{np.mean([f['requests'] for f in main]):.0f}",
         spread=_span([sd for f in main for sd in f["sd"].values()], ".0f"),
@@ -705,7 +713,8 @@ NOTES = """## What the numbers say (and where the targets are not met)
      leaves others where demand is thin, so its chosen vehicle is busy more often.
   3. *Stranded vehicles.* A vehicle that starts where it is never the nearest to a
      request is never chosen and never moves (the "dead unit" of online k-means):
-     {never_moved} of `sa`'s vehicles ended exactly where they started the two hours
+     {never_moved} of `sa`'s vehicles (`sa-cold`: {never_moved_cold}) ended exactly
+     where they started the two hours
      (positions figures: circles without an arrow).
 - **Much of the measured wait is not about positions.** Even when the chosen vehicle
   went, SUMO's wait exceeds the service's free-flow estimate by {overhead} s on average
