@@ -399,7 +399,11 @@ class EventLog:
             raise InvalidInput("append_groups takes at most one group per fleet")
         what = "append to fleets " + ", ".join(repr(g.fleet_id) for g in groups)
         with self._write(what) as conn:
-            return [_append_in(conn, group) for group in groups]
+            versions = q.lock_fleets(conn, [group.fleet_id for group in groups])
+            staged = [_stage_in(conn, group, versions[group.fleet_id]) for group in groups]
+            q.insert_event_rows(conn, [row for stage in staged for row in stage.rows])
+            q.move_versions(conn, [stage.move for stage in staged if stage.move is not None])
+            return [stage.items for stage in staged]
 
     def events(self, fleet_id: str, *, after: int = 0, limit: int = 1000) -> list[EventRecord]:
         """Return up to ``limit`` events with ``seq > after``, in order (one page).
@@ -521,11 +525,21 @@ class FleetGroup:
     snapshot: Snapshot | None = None
 
 
-def _append_in(conn: Connection, group: FleetGroup) -> list[GroupItem]:
-    """Write one fleet's group inside the open transaction ``conn``."""
+@dataclass(frozen=True, slots=True)
+class _Staged:
+    """One fleet's share of a transaction, computed but not yet written."""
+
+    rows: list[dict[str, Any]]
+    move: tuple[str, int, str | None] | None
+    """``(fleet, new version, snapshot or None)``, ``None`` when nothing is written."""
+    items: list[GroupItem]
+
+
+def _stage_in(conn: Connection, group: FleetGroup, version: int) -> _Staged:
+    """Build one fleet's group inside the open transaction ``conn``, whose row is
+    locked at ``version``; the caller writes the rows and the version."""
     fleet_id, expected_version = group.fleet_id, group.expected_version
     requests, build, snapshot = group.requests, group.build, group.snapshot
-    version = int(q.lock_fleet(conn, fleet_id).version)
     if expected_version > version:
         raise Conflict(
             f"fleet {fleet_id!r} is at version {version}; "
@@ -574,9 +588,13 @@ def _append_in(conn: Connection, group: FleetGroup) -> list[GroupItem]:
         )
         rows += mine
         outcome[index] = (q.records_of_rows(mine), None)
-    if rows:
-        q.insert_events(conn, fleet_id, rows, snapshot=snapshot)
     new_version = version + len(rows)
+    move: tuple[str, int, str | None] | None = None
+    if rows:
+        state = snapshot(new_version) if snapshot is not None else None
+        if state is not None and not isinstance(state, str):
+            raise InvalidInput("snapshot must return JSON text (str) or None")
+        move = (fleet_id, new_version, state)
     items: list[GroupItem] = []
     for index, (key, digest) in enumerate(requests):
         first = repeats.get(index, index)
@@ -598,4 +616,4 @@ def _append_in(conn: Connection, group: FleetGroup) -> list[GroupItem]:
             items.append(GroupItem(new_version, (), missed, False, failed))
         else:
             items.append(GroupItem(new_version, events_of, missed, duplicate))
-    return items
+    return _Staged(rows, move, items)

@@ -6,7 +6,7 @@ caller's transaction and never commits.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from datetime import UTC, datetime
 from types import SimpleNamespace
 from typing import Any
@@ -25,9 +25,11 @@ __all__ = [
     "check_version",
     "event_rows",
     "fleet_event_stats",
-    "insert_events",
+    "insert_event_rows",
     "keyed_batch",
     "lock_fleet",
+    "lock_fleets",
+    "move_versions",
     "now",
     "records_of_rows",
     "select_events",
@@ -40,6 +42,12 @@ __all__ = [
 _FLEET_KEY: sa.BindParameter[str] = sa.bindparam("fleet_key")
 _SELECT_FLEET = sa.select(fleets).where(fleets.c.id == _FLEET_KEY)
 _LOCK_FLEET = _SELECT_FLEET.with_for_update()
+_LOCK_FLEETS = (
+    sa.select(fleets.c.id, fleets.c.version, fleets.c.deleted)
+    .where(fleets.c.id.in_(sa.bindparam("fleet_keys", expanding=True)))
+    .order_by(fleets.c.id)
+    .with_for_update()
+)
 _UPDATE_FLEET = sa.update(fleets).where(fleets.c.id == _FLEET_KEY)
 _INSERT_EVENTS = sa.insert(events)
 _SELECT_EVENTS = (
@@ -124,27 +132,46 @@ def records_of_rows(rows: Sequence[dict[str, Any]]) -> tuple[EventRecord, ...]:
     return tuple(EventRecord.from_row(SimpleNamespace(**row)) for row in rows)
 
 
-def insert_events(
-    conn: Connection,
-    fleet_id: str,
-    rows: list[dict[str, Any]],
-    *,
-    snapshot: Callable[[int], str | None] | None,
-) -> None:
-    """Insert event rows and move the fleet's version (and snapshot) along.
+def insert_event_rows(conn: Connection, rows: list[dict[str, Any]]) -> None:
+    """Insert event rows (of any fleets) in one statement."""
+    if rows:
+        conn.execute(_INSERT_EVENTS, rows)
 
-    ``snapshot(new_version)`` is called after the insert; a string it returns
-    is stored as the fleet's state at ``new_version``.
+
+def move_versions(conn: Connection, moves: Sequence[tuple[str, int, str | None]]) -> None:
+    """Set each ``(fleet, version, state)``'s version, and its snapshot where ``state`` is
+    JSON text; at most two statements, however many fleets."""
+    plain = [
+        {"fleet_key": fleet, "version": version} for fleet, version, state in moves if not state
+    ]
+    saved = [
+        {"fleet_key": fleet, "version": version, "state": state, "snapshot_version": version}
+        for fleet, version, state in moves
+        if state
+    ]
+    for params in (plain, saved):
+        if params:
+            conn.execute(_UPDATE_FLEET, params)
+
+
+def lock_fleets(conn: Connection, fleet_ids: Sequence[str]) -> dict[str, int]:
+    """Lock live fleets' rows for this transaction, in id order; their versions.
+
+    One ``SELECT ... FOR UPDATE`` on PostgreSQL (rows locked in id order, as
+    every writer does, so two writers cannot deadlock); on SQLite the write lock
+    of ``BEGIN IMMEDIATE`` does the same job.
+
+    Raises
+    ------
+    UnknownFleet
+        One of the fleets does not exist or was deleted.
     """
-    conn.execute(_INSERT_EVENTS, rows)
-    new_version = int(rows[-1]["seq"])
-    values: dict[str, Any] = {"version": new_version}
-    state = snapshot(new_version) if snapshot is not None else None
-    if state is not None:
-        if not isinstance(state, str):
-            raise InvalidInput("snapshot must return JSON text (str) or None")
-        values |= {"state": state, "snapshot_version": new_version}
-    conn.execute(_UPDATE_FLEET, {"fleet_key": fleet_id, **values})
+    rows = conn.execute(_LOCK_FLEETS, {"fleet_keys": sorted(set(fleet_ids))}).all()
+    versions = {row.id: int(row.version) for row in rows if not row.deleted}
+    for fleet_id in fleet_ids:
+        if fleet_id not in versions:
+            raise UnknownFleet(f"no fleet {fleet_id!r}")
+    return versions
 
 
 def select_network(conn: Connection, network_id: str) -> Any:
