@@ -780,6 +780,12 @@ def main(argv: list[str] | None = None) -> int:
     left_out: list[str] = []
     if args.only:
         keep = set(args.only.split(","))
+        unknown = sorted(keep - {e.key for e in experiments})
+        if unknown:
+            parser.error(
+                f"--only: unknown experiment(s) {', '.join(unknown)}; "
+                f"known: {', '.join(e.key for e in experiments)}"
+            )
         left_out = [e.key for e in experiments if e.key not in keep]
         experiments = [e for e in experiments if e.key in keep]
     FIGURES.mkdir(parents=True, exist_ok=True)

@@ -24,14 +24,14 @@ from __future__ import annotations
 
 import asyncio
 import re
-from typing import Any
 
 from prometheus_client import Counter
 from pydantic import ValidationError
-from starlette.types import ASGIApp, Message, Receive, Scope, Send
+from starlette.types import ASGIApp, Receive, Scope, Send
 
 from routing_svc.errors import RoutingSvcError
 from routing_svc.service.fleets import FleetService
+from routing_svc.service.guards import replaying
 from routing_svc.service.problems import problem, status_of
 from routing_svc.service.routes.targets import TARGETS_APPLIED, submit_target
 from routing_svc.service.schemas import TargetSpec
@@ -70,7 +70,7 @@ class TargetFastPath:
         body = await _read_body(receive)
         if body is None:  # the client went away
             return
-        replay = _replaying(body, receive)
+        replay = replaying(body, receive)
         if not usable:
             await self.app(scope, replay, send)
             return
@@ -125,18 +125,3 @@ async def _read_body(receive: Receive) -> bytes | None:
         chunks.append(message.get("body", b""))
         if not message.get("more_body", False):
             return b"".join(chunks)
-
-
-def _replaying(body: bytes, receive: Receive) -> Receive:
-    """A ``receive`` that gives ``body`` once more, then what ``receive`` gives."""
-    delivered = False
-
-    async def replay() -> Message:
-        nonlocal delivered
-        if not delivered:
-            delivered = True
-            message: dict[str, Any] = {"type": "http.request", "body": body, "more_body": False}
-            return message
-        return await receive()
-
-    return replay
