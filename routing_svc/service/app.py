@@ -80,7 +80,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 with contextlib.suppress(asyncio.CancelledError):
                     await feeder
             if service is not None:
-                await asyncio.to_thread(service.close)  # commits what is queued
+                await service.drain()  # commits what the event loop queued
+                await asyncio.to_thread(service.close)  # ... and the writer thread
             log.close()
 
     app = FastAPI(

@@ -1,10 +1,22 @@
 """Fleet operations over the event log: the domain side of the REST API.
 
-Every write goes through one writer thread per service (group commit): a
-write request joins the service's queue and gets a future; the writer takes
-everything queued (up to :data:`GROUP_CAP` events), and commits the requests
-of all fleets in it in one transaction (:meth:`EventLog.append_groups`), so
-one ``fsync`` acknowledges them all. Under each fleet's lock the cached
+Every write is committed in groups (group commit): a write request joins a
+queue and gets a future; a writer takes everything queued (up to
+:data:`GROUP_CAP` events), and commits the requests of all fleets in it in
+one transaction (:meth:`EventLog.append_groups`), so one ``fsync``
+acknowledges them all.
+
+There are two writers. Requests made on an event loop's thread (the REST
+API's target routes) are written *by that event loop* on SQLite: it computes
+the group and stages its transaction itself, without waiting for any lock,
+and only the commit (the ``fsync``) runs on a worker thread, while the loop
+goes on serving requests. The targets' Python work thus stays on one thread
+instead of passing the interpreter lock back and forth with a writer thread
+for every target. When that is not possible at once (another thread or
+process holds the write lock, a fleet's lock is taken, a fleet is not in
+memory), the group goes to a worker thread as a whole. Every other request
+(from worker threads, and all of them on PostgreSQL, whose statements wait
+on the network) joins the queue of the writer thread. Under each fleet's lock the cached
 :class:`FleetRuntime` first replays the events other workers (or hosts) wrote
 since it last looked, then computes each request's events in queue order; a
 request that fails with a domain error fails alone. Every future is resolved
@@ -16,17 +28,18 @@ failed after computing) is dropped and rebuilt from the log.
 
 from __future__ import annotations
 
+import asyncio
 import hashlib
 import json
 import threading
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Future
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
 
-from prometheus_client import Histogram
+from prometheus_client import Counter, Histogram
 
 from routing_svc.errors import (
     Conflict,
@@ -51,6 +64,12 @@ COMMIT_GROUP_SIZE = Histogram(
     "routing_svc_commit_group_size",
     "Write requests committed together in one transaction (group commit)",
     buckets=(1, 2, 4, 8, 16, 32, 64, 128, 256),
+)
+
+COMMITS = Counter(
+    "routing_svc_commits_total",
+    "Transactions of write requests committed, by the writer that staged them",
+    ["writer"],
 )
 
 Compute = Callable[[FleetRuntime], list[NewEvent]]
@@ -156,14 +175,20 @@ class FleetService:
         self._queue_cond = threading.Condition()
         self._writer: threading.Thread | None = None
         self._closed = False
+        # the event loop's writer (see the module's docstring)
+        self._loop_queue: deque[_Pending] = deque()
+        self._loop_drain: asyncio.Task[None] | None = None
+        self._committer: ThreadPoolExecutor | None = None
 
     # -- plumbing ---------------------------------------------------------------
 
+    def _lock_of(self, fleet_id: str) -> threading.Lock:
+        with self._locks_guard:
+            return self._locks.setdefault(fleet_id, threading.Lock())
+
     @contextmanager
     def _locked(self, fleet_id: str) -> Iterator[None]:
-        with self._locks_guard:
-            lock = self._locks.setdefault(fleet_id, threading.Lock())
-        with lock:
+        with self._lock_of(fleet_id):
             yield
 
     def network(self, network_id: str) -> NetworkEntry:
@@ -229,6 +254,7 @@ class FleetService:
         idempotency_key: str | None = None,
         digest: str | None = None,
         size: int = 1,
+        event_loop_may_write: bool = True,
     ) -> Future[tuple[list[str], int]]:
         """Queue ``compute(runtime) -> [NewEvent]`` for the next group commit.
 
@@ -245,6 +271,9 @@ class FleetService:
         size
             How many events the request will write, counted against
             :data:`GROUP_CAP`.
+        event_loop_may_write
+            Called on an event loop's thread, let that loop write the request
+            (on SQLite). A caller that blocks on the future must say ``False``.
 
         Returns
         -------
@@ -254,6 +283,14 @@ class FleetService:
             fleet's version if it wrote none), or to the request's error.
         """
         mine = _Pending(fleet_id, compute, idempotency_key, digest, size)
+        loop = _running_loop() if event_loop_may_write else None
+        if loop is not None and self.log.dialect == "sqlite":
+            if self._closed:
+                raise StorageError("the fleet service is shut down")
+            self._loop_queue.append(mine)
+            if self._loop_drain is None:
+                self._loop_drain = loop.create_task(self._drain_on_loop())
+            return mine.future
         with self._queue_cond:
             if self._closed:
                 raise StorageError("the fleet service is shut down")
@@ -267,13 +304,102 @@ class FleetService:
         return mine.future
 
     def close(self) -> None:
-        """Commit what is queued, then stop the writer thread."""
+        """Commit what the writer thread has queued, then stop it.
+
+        Await :meth:`drain` first on the event loop that wrote: what is still
+        in its queue then fails with :class:`StorageError`.
+        """
         with self._queue_cond:
             self._closed = True
             self._queue_cond.notify_all()
             writer = self._writer
         if writer is not None and writer is not threading.current_thread():
             writer.join()
+        while self._loop_queue:
+            pending = self._loop_queue.popleft()
+            if not pending.future.done():
+                pending.future.set_exception(StorageError("the fleet service is shut down"))
+        if self._committer is not None:
+            self._committer.shutdown(wait=True)
+
+    async def drain(self) -> None:
+        """Wait until the event loop's writer has committed everything queued to it."""
+        while self._loop_drain is not None:
+            await asyncio.shield(self._loop_drain)
+
+    # -- the event loop's writer --------------------------------------------------
+
+    async def _drain_on_loop(self) -> None:
+        """Commit the event loop's queue, group after group, until it is empty."""
+        try:
+            while self._loop_queue:
+                batch = [self._loop_queue.popleft()]
+                total = batch[0].size
+                while self._loop_queue and total + self._loop_queue[0].size <= GROUP_CAP:
+                    total += self._loop_queue[0].size
+                    batch.append(self._loop_queue.popleft())
+                try:
+                    await self._commit_on_loop(batch)
+                except BaseException as exc:  # never leave a caller waiting
+                    for pending in batch:
+                        if not pending.future.done():
+                            pending.future.set_exception(exc)
+                    if not isinstance(exc, Exception):
+                        raise
+        finally:
+            self._loop_drain = None
+
+    async def _commit_on_loop(self, batch: list[_Pending]) -> None:
+        """Stage the batch's transaction here, commit it on the committer thread.
+
+        Staging never waits: the fleets' locks and the database's write lock
+        are only tried. If one is taken, or a fleet is not in memory, or the
+        transaction fails, the batch goes to a worker thread as a whole
+        (:meth:`_commit`), after any cache the staging changed was dropped.
+        """
+        loop = asyncio.get_running_loop()
+        by_fleet: dict[str, list[_Pending]] = {}
+        for pending in batch:
+            by_fleet.setdefault(pending.fleet_id, []).append(pending)
+        held: list[threading.Lock] = []
+        jobs: list[_FleetJob] = []
+        committed = False
+        try:
+            ready = True
+            for fleet_id in sorted(by_fleet):
+                lock = self._lock_of(fleet_id)
+                if not self.is_cached(fleet_id) or not lock.acquire(blocking=False):
+                    ready = False
+                    break
+                held.append(lock)
+            if ready:
+                opened = None
+                try:
+                    jobs = [_FleetJob(self, fid, by_fleet[fid]) for fid in sorted(by_fleet)]
+                    opened = self.log.try_append_groups_uncommitted([job.request() for job in jobs])
+                    if opened is not None:
+                        if self._committer is None:
+                            self._committer = ThreadPoolExecutor(
+                                max_workers=1, thread_name_prefix="routing-svc-commit"
+                            )
+                        await loop.run_in_executor(self._committer, opened.commit)
+                        committed = True
+                except BaseException:
+                    # computed (perhaps in part) but not durable: rebuild from the log
+                    for job in jobs:
+                        self._cache.pop(job.fleet_id, None)
+                if committed:
+                    assert opened is not None
+                    COMMITS.labels("event_loop").inc()
+                    for job, items in zip(jobs, opened.items, strict=True):
+                        job.settle(items)
+        finally:
+            for lock in held:
+                lock.release()
+        if not committed:
+            rest = [p for p in batch if not p.future.done()]
+            if rest:
+                await loop.run_in_executor(None, self._commit, rest)
 
     def _write_loop(self) -> None:
         while True:
@@ -325,6 +451,7 @@ class FleetService:
                     for pending in job.diverged:
                         job.group.remove(pending)  # its future holds its error
                 return False
+            COMMITS.labels("thread").inc()
             for job, items in zip(jobs, results, strict=True):
                 job.settle(items)
             return True
@@ -356,6 +483,7 @@ class FleetService:
                     if not pending.future.done():
                         pending.future.set_exception(exc)
                 return []
+            COMMITS.labels("thread").inc()
             job.settle(items)
             return []
 
@@ -427,8 +555,10 @@ class FleetService:
         *,
         idempotency_key: str | None = None,
         body: Any = None,
+        blocking: bool = False,
     ) -> Future[tuple[list[str], int]]:
-        """Queue targets to be applied in order in one transaction (see :meth:`submit`).
+        """Queue targets to be applied in order in one transaction (see :meth:`submit`;
+        ``blocking``: the caller waits for the future on this thread).
 
         Positions are resolved first, so a bad position fails here and queues nothing.
         """
@@ -443,7 +573,12 @@ class FleetService:
 
         digest = request_hash(body) if idempotency_key is not None else None
         return self.submit(
-            fleet_id, compute, idempotency_key=idempotency_key, digest=digest, size=len(resolved)
+            fleet_id,
+            compute,
+            idempotency_key=idempotency_key,
+            digest=digest,
+            size=len(resolved),
+            event_loop_may_write=not blocking,
         )
 
     def post_targets(
@@ -456,7 +591,7 @@ class FleetService:
     ) -> tuple[list[str], int]:
         """Apply targets in order in one transaction; return each result's JSON text."""
         return self.submit_targets(
-            fleet_id, targets, idempotency_key=idempotency_key, body=body
+            fleet_id, targets, idempotency_key=idempotency_key, body=body, blocking=True
         ).result()
 
     def assign(self, fleet_id: str, target: TargetSpec) -> dict[str, Any]:
@@ -488,7 +623,7 @@ class FleetService:
             payload, result = runtime.apply_travel_times(times)
             return [NewEvent("weights_updated", payload, result)]
 
-        results, _ = self.submit(fleet_id, compute).result()
+        results, _ = self.submit(fleet_id, compute, event_loop_may_write=False).result()
         data: dict[str, Any] = json.loads(results[0])
         return data
 
@@ -527,3 +662,11 @@ class FleetService:
             "snapshot_identical": identical,
             "state_sha256": hashlib.sha256(runtime.snapshot_json().encode()).hexdigest(),
         }
+
+
+def _running_loop() -> asyncio.AbstractEventLoop | None:
+    """The event loop running on this thread, if any."""
+    try:
+        return asyncio.get_running_loop()
+    except RuntimeError:
+        return None

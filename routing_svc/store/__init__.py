@@ -30,6 +30,7 @@ from routing_svc.store.event_log import (
     EventLog,
     FleetGroup,
     Snapshot,
+    UncommittedAppend,
     open_event_log,
 )
 from routing_svc.store.records import (
@@ -55,5 +56,6 @@ __all__ = [
     "NetworkRecord",
     "NewEvent",
     "Snapshot",
+    "UncommittedAppend",
     "open_event_log",
 ]

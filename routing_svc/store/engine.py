@@ -41,6 +41,7 @@ __all__ = [
     "MIGRATIONS_DIR",
     "check_durability",
     "create_store_engine",
+    "is_sqlite_busy",
     "storage_errors",
     "upgrade",
 ]
@@ -192,6 +193,15 @@ def upgrade(engine: Engine) -> None:
             )
         config.attributes["connection"] = connection
         command.upgrade(config, "head")
+
+
+def is_sqlite_busy(error: StorageError) -> bool:
+    """Whether ``error`` (from :func:`storage_errors`) is SQLite's "database is locked"."""
+    cause = error.__cause__
+    orig = getattr(cause, "orig", None)
+    return isinstance(orig, sqlite3.OperationalError) and (
+        "locked" in str(orig) or "busy" in str(orig)
+    )
 
 
 @contextmanager

@@ -57,6 +57,7 @@ __all__ = [
     "EventLog",
     "FleetGroup",
     "Snapshot",
+    "UncommittedAppend",
     "open_event_log",
 ]
 
@@ -100,6 +101,7 @@ class EventLog:
         # SQLite has one write lock per database: threads of this process queue
         # here instead of in SQLite's busy handler, which sleeps between retries.
         self._sqlite_writer = threading.Lock()
+        self._impatient: Connection | None = None  # see try_append_groups_uncommitted
 
     # -- lifecycle -------------------------------------------------------------
 
@@ -122,6 +124,8 @@ class EventLog:
     def close(self) -> None:
         """Release every connection. Closing twice is harmless."""
         if self._engine is not None:
+            with self._sqlite_writer:
+                self._drop_impatient_connection()
             self._engine.dispose()
             self._engine = None
 
@@ -390,20 +394,79 @@ class EventLog:
             Per group, one item per request; returned only after the
             transaction has committed.
         """
-        for group in groups:
-            q.check_version(group.expected_version)
-            for key, digest in group.requests:
-                q.check_key(key, "idempotency key")
-                q.check_key(digest, "request hash")
-        if len({group.fleet_id for group in groups}) != len(groups):
-            raise InvalidInput("append_groups takes at most one group per fleet")
-        what = "append to fleets " + ", ".join(repr(g.fleet_id) for g in groups)
+        what = _check_groups(groups)
         with self._write(what) as conn:
-            versions = q.lock_fleets(conn, [group.fleet_id for group in groups])
-            staged = [_stage_in(conn, group, versions[group.fleet_id]) for group in groups]
-            q.insert_event_rows(conn, [row for stage in staged for row in stage.rows])
-            q.move_versions(conn, [stage.move for stage in staged if stage.move is not None])
-            return [stage.items for stage in staged]
+            return _write_groups(conn, groups)
+
+    def try_append_groups_uncommitted(
+        self, groups: Sequence[FleetGroup]
+    ) -> UncommittedAppend | None:
+        """:meth:`append_groups` without its commit, if it can start without waiting.
+
+        For a caller that must not block (an event loop): on SQLite, the
+        transaction runs on a connection of its own that never waits for a lock.
+        If another thread of this process is writing, or another process holds
+        the database's write lock, it returns ``None`` and nothing happened. Else
+        the groups are staged and written in a transaction left open, and the
+        returned :class:`UncommittedAppend` holds their items; its
+        :meth:`~UncommittedAppend.commit` (which waits for the disk, so call it
+        from a worker thread) makes them durable. Until then every other writer
+        of this process waits. On PostgreSQL it always returns ``None``.
+
+        Raises
+        ------
+        Exception
+            Whatever :meth:`append_groups` raises; the transaction is then rolled
+            back and nothing is written.
+        """
+        what = _check_groups(groups)
+        engine = self._require()
+        if engine.dialect.name != "sqlite" or not self._sqlite_writer.acquire(blocking=False):
+            return None
+        try:
+            conn = self._impatient_connection(what)
+            try:
+                with store_engine.storage_errors(what):
+                    conn.begin()
+            except StorageError as error:
+                if not store_engine.is_sqlite_busy(error):
+                    raise
+                self._drop_impatient_connection()
+                self._sqlite_writer.release()
+                return None
+            try:
+                with store_engine.storage_errors(what):
+                    items = _write_groups(conn, groups)
+            except BaseException:
+                conn.rollback()
+                raise
+        except BaseException:
+            self._drop_impatient_connection()
+            self._sqlite_writer.release()
+            raise
+        return UncommittedAppend(self, conn, what, items)
+
+    def _impatient_connection(self, what: str) -> Connection:
+        """The SQLite connection of :meth:`try_append_groups_uncommitted`, kept open; its
+        busy timeout is 0: it never waits for another process's write lock."""
+        if self._impatient is None or self._impatient.closed or self._impatient.invalidated:
+            with store_engine.storage_errors(what):
+                conn = self._require().connect()
+                conn.detach()  # closed, not pooled, when dropped: no other user gets timeout 0
+                # on the driver's connection: a statement through ``conn`` would begin a
+                # transaction (and take the write lock)
+                driver = conn.connection.dbapi_connection
+                assert driver is not None
+                driver.execute("PRAGMA busy_timeout = 0")
+            self._impatient = conn
+        return self._impatient
+
+    def _drop_impatient_connection(self) -> None:
+        if self._impatient is not None:
+            try:
+                self._impatient.close()
+            finally:
+                self._impatient = None
 
     def events(self, fleet_id: str, *, after: int = 0, limit: int = 1000) -> list[EventRecord]:
         """Return up to ``limit`` events with ``seq > after``, in order (one page).
@@ -490,6 +553,67 @@ class EventLog:
         with store_engine.storage_errors(what), engine.connect() as conn:
             conn.execution_options(**{store_engine.BEGIN_MODE: "DEFERRED"})
             yield conn
+
+
+def _check_groups(groups: Sequence[FleetGroup]) -> str:
+    """Check :meth:`EventLog.append_groups`'s arguments; what the append is called in errors."""
+    for group in groups:
+        q.check_version(group.expected_version)
+        for key, digest in group.requests:
+            q.check_key(key, "idempotency key")
+            q.check_key(digest, "request hash")
+    if len({group.fleet_id for group in groups}) != len(groups):
+        raise InvalidInput("append_groups takes at most one group per fleet")
+    return "append to fleets " + ", ".join(repr(g.fleet_id) for g in groups)
+
+
+def _write_groups(conn: Connection, groups: Sequence[FleetGroup]) -> list[list[GroupItem]]:
+    """Stage and write ``groups`` in the open write transaction ``conn``; their items."""
+    versions = q.lock_fleets(conn, [group.fleet_id for group in groups])
+    staged = [_stage_in(conn, group, versions[group.fleet_id]) for group in groups]
+    q.insert_event_rows(conn, [row for stage in staged for row in stage.rows])
+    q.move_versions(conn, [stage.move for stage in staged if stage.move is not None])
+    return [stage.items for stage in staged]
+
+
+class UncommittedAppend:
+    """The open transaction of :meth:`EventLog.try_append_groups_uncommitted`.
+
+    ``items`` are the groups' items, valid once :meth:`commit` returned.
+    Exactly one of :meth:`commit` and :meth:`rollback` must be called; both
+    may run on another thread than the one that started the transaction.
+    """
+
+    def __init__(
+        self, log: EventLog, conn: Connection, what: str, items: list[list[GroupItem]]
+    ) -> None:
+        self._log = log
+        self._conn = conn
+        self._what = what
+        self.items = items
+
+    def commit(self) -> None:
+        """Commit (one ``fsync``); on failure nothing is written and the error is raised."""
+        log = self._log
+        try:
+            with store_engine.storage_errors(f"commit ({self._what})"):
+                self._conn.commit()
+        except BaseException:
+            log._drop_impatient_connection()
+            raise
+        finally:
+            log._sqlite_writer.release()
+
+    def rollback(self) -> None:
+        """Write nothing."""
+        log = self._log
+        try:
+            self._conn.rollback()
+        except BaseException:
+            log._drop_impatient_connection()
+            raise
+        finally:
+            log._sqlite_writer.release()
 
 
 def _checked_group(
