@@ -80,7 +80,8 @@ class TargetFastPath:
             await self.app(scope, replay, send)
             return
         try:
-            queued = asyncio.wrap_future(submit_target(service, match.group(1), target, key))
+            loop = asyncio.get_running_loop()
+            queued = asyncio.wrap_future(submit_target(service, match.group(1), target, key, loop))
         except RoutingSvcError:  # raised before anything was queued: the route answers
             await self.app(scope, replay, send)
             return

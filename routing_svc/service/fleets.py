@@ -254,7 +254,7 @@ class FleetService:
         idempotency_key: str | None = None,
         digest: str | None = None,
         size: int = 1,
-        event_loop_may_write: bool = True,
+        loop: asyncio.AbstractEventLoop | None = None,
     ) -> Future[tuple[list[str], int]]:
         """Queue ``compute(runtime) -> [NewEvent]`` for the next group commit.
 
@@ -271,9 +271,10 @@ class FleetService:
         size
             How many events the request will write, counted against
             :data:`GROUP_CAP`.
-        event_loop_may_write
-            Called on an event loop's thread, let that loop write the request
-            (on SQLite). A caller that blocks on the future must say ``False``.
+        loop
+            The running event loop, for a coroutine calling on its thread: on
+            SQLite the loop then stages the request's group itself (see the
+            module's docstring). ``None``: the writer thread writes it.
 
         Returns
         -------
@@ -283,7 +284,6 @@ class FleetService:
             fleet's version if it wrote none), or to the request's error.
         """
         mine = _Pending(fleet_id, compute, idempotency_key, digest, size)
-        loop = _running_loop() if event_loop_may_write else None
         if loop is not None and self.log.dialect == "sqlite":
             if self._closed:
                 raise StorageError("the fleet service is shut down")
@@ -555,10 +555,10 @@ class FleetService:
         *,
         idempotency_key: str | None = None,
         body: Any = None,
-        blocking: bool = False,
+        loop: asyncio.AbstractEventLoop | None = None,
     ) -> Future[tuple[list[str], int]]:
-        """Queue targets to be applied in order in one transaction (see :meth:`submit`;
-        ``blocking``: the caller waits for the future on this thread).
+        """Queue targets to be applied in order in one transaction (see :meth:`submit`,
+        also for ``loop``).
 
         Positions are resolved first, so a bad position fails here and queues nothing.
         """
@@ -578,7 +578,7 @@ class FleetService:
             idempotency_key=idempotency_key,
             digest=digest,
             size=len(resolved),
-            event_loop_may_write=not blocking,
+            loop=loop,
         )
 
     def post_targets(
@@ -591,7 +591,7 @@ class FleetService:
     ) -> tuple[list[str], int]:
         """Apply targets in order in one transaction; return each result's JSON text."""
         return self.submit_targets(
-            fleet_id, targets, idempotency_key=idempotency_key, body=body, blocking=True
+            fleet_id, targets, idempotency_key=idempotency_key, body=body
         ).result()
 
     def assign(self, fleet_id: str, target: TargetSpec) -> dict[str, Any]:
@@ -623,7 +623,7 @@ class FleetService:
             payload, result = runtime.apply_travel_times(times)
             return [NewEvent("weights_updated", payload, result)]
 
-        results, _ = self.submit(fleet_id, compute, event_loop_may_write=False).result()
+        results, _ = self.submit(fleet_id, compute).result()
         data: dict[str, Any] = json.loads(results[0])
         return data
 
@@ -662,11 +662,3 @@ class FleetService:
             "snapshot_identical": identical,
             "state_sha256": hashlib.sha256(runtime.snapshot_json().encode()).hexdigest(),
         }
-
-
-def _running_loop() -> asyncio.AbstractEventLoop | None:
-    """The event loop running on this thread, if any."""
-    try:
-        return asyncio.get_running_loop()
-    except RuntimeError:
-        return None

@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Callable
 from concurrent.futures import Future
-from functools import partial
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Header, Request, Response
@@ -35,8 +34,16 @@ TARGET_RESPONSE: dict[int | str, dict[str, Any]] = {
 }
 
 
+Submit = Callable[[asyncio.AbstractEventLoop | None], Future[tuple[list[str], int]]]
+"""``submit(loop)`` queues a request (``loop``: see :meth:`FleetService.submit`)."""
+
+
 def submit_target(
-    service: FleetService, fleet_id: str, target: TargetSpec, idempotency_key: str | None
+    service: FleetService,
+    fleet_id: str,
+    target: TargetSpec,
+    idempotency_key: str | None,
+    loop: asyncio.AbstractEventLoop | None = None,
 ) -> Future[tuple[list[str], int]]:
     """Queue one target of the single-target route for the service's writer.
 
@@ -44,19 +51,23 @@ def submit_target(
     queues nothing) when the target's position is invalid.
     """
     body = target.model_dump(mode="json") if idempotency_key is not None else None
-    return service.submit_targets(fleet_id, [target], idempotency_key=idempotency_key, body=body)
+    return service.submit_targets(
+        fleet_id, [target], idempotency_key=idempotency_key, body=body, loop=loop
+    )
 
 
-async def _committed(
-    service: FleetService, fleet_id: str, submit: Callable[[], Future[tuple[list[str], int]]]
-) -> tuple[list[str], int]:
+async def _committed(service: FleetService, fleet_id: str, submit: Submit) -> tuple[list[str], int]:
     """Queue a request (``submit``) and wait for its commit.
 
-    The event loop only resolves the positions and queues the request when the
-    fleet is in memory; a fleet that must first be read from the database is
-    queued from a worker thread.
+    The event loop only resolves the positions and queues the request (for
+    itself to write) when the fleet is in memory; a fleet that must first be
+    read from the database is queued from a worker thread, for the writer
+    thread.
     """
-    future = submit() if service.is_cached(fleet_id) else await run_in_threadpool(submit)
+    if service.is_cached(fleet_id):
+        future = submit(asyncio.get_running_loop())
+    else:
+        future = await run_in_threadpool(submit, None)
     return await asyncio.wrap_future(future)
 
 
@@ -90,7 +101,9 @@ async def post_target(
         raise RequestValidationError(exc.errors(include_url=False)) from None
     service: FleetService = request.app.state.fleets
     results, _ = await _committed(
-        service, fleet_id, partial(submit_target, service, fleet_id, target, idempotency_key)
+        service,
+        fleet_id,
+        lambda loop: submit_target(service, fleet_id, target, idempotency_key, loop),
     )
     TARGETS_APPLIED.inc()
     return Response(results[0], media_type="application/json")
@@ -105,9 +118,12 @@ async def post_target_batch(
 ) -> Response:
     """Serve a list of targets in order, in one transaction."""
     body = batch.model_dump(mode="json") if idempotency_key is not None else None
-    submit = partial(
-        service.submit_targets, fleet_id, batch.targets, idempotency_key=idempotency_key, body=body
-    )
+
+    def submit(loop: asyncio.AbstractEventLoop | None) -> Future[tuple[list[str], int]]:
+        return service.submit_targets(
+            fleet_id, batch.targets, idempotency_key=idempotency_key, body=body, loop=loop
+        )
+
     results, version = await _committed(service, fleet_id, submit)
     TARGETS_APPLIED.inc(len(results))
     answer = '{"version":' + str(version) + ',"results":[' + ",".join(results) + "]}"

@@ -1,0 +1,89 @@
+"""Who writes the targets of the REST API: the event loop (SQLite) or the writer thread, and
+what happens when the event loop cannot take the database's write lock at once."""
+
+from __future__ import annotations
+
+import re
+import sqlite3
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import httpx
+
+from tests.service.conftest import LiveServer
+from tests.service.test_api import fleet_body
+from tests.service.test_durability import targets
+
+
+def commits(metrics_text: str) -> dict[str, float]:
+    """``routing_svc_commits_total`` by writer."""
+    found = re.findall(r'^routing_svc_commits_total\{writer="(\w+)"\} (\S+)$', metrics_text, re.M)
+    return {writer: float(value) for writer, value in found}
+
+
+def test_each_backend_has_its_writer(live_server: Callable[..., LiveServer], db_url: str) -> None:
+    server = live_server()
+    with httpx.Client(base_url=server.url, timeout=60) as http:
+        http.post("/v1/fleets", json=fleet_body()).raise_for_status()
+        bodies = targets(3, 40)
+        with ThreadPoolExecutor(8) as pool:
+            answers = list(pool.map(lambda t: http.post("/v1/fleets/f1/targets", json=t), bodies))
+        assert [a.status_code for a in answers] == [200] * len(bodies)
+        assert sorted(a.json()["seq"] for a in answers) == list(range(2, 2 + len(bodies)))
+        counted = commits(http.get("/metrics").text)
+    if db_url.startswith("sqlite"):
+        # staged on the event loop, all of them (nothing else was writing)
+        assert counted.get("event_loop", 0) >= 1
+        assert counted.get("thread", 0) == 0
+    else:
+        assert counted.get("event_loop", 0) == 0
+        assert counted.get("thread", 0) >= 1
+
+
+def test_a_held_write_lock_sends_targets_to_a_thread_and_the_loop_keeps_serving(
+    tmp_path: Path,
+) -> None:
+    db_url = f"sqlite:///{tmp_path / 'locked.db'}"
+    server = LiveServer(db_url, tmp_path).start()
+    try:
+        with httpx.Client(base_url=server.url, timeout=60) as http:
+            http.post("/v1/fleets", json=fleet_body()).raise_for_status()
+            http.post("/v1/fleets", json=fleet_body("f2")).raise_for_status()
+            # another process takes the database's write lock
+            other = sqlite3.connect(tmp_path / "locked.db", isolation_level=None)
+            other.execute("BEGIN IMMEDIATE")
+            answers: list[httpx.Response] = []
+            poster = threading.Thread(
+                target=lambda: answers.append(
+                    httpx.post(server.url + "/v1/fleets/f1/targets", json=targets(4, 1)[0],
+                               timeout=60)
+                )
+            )  # fmt: skip
+            poster.start()
+            try:
+                time.sleep(0.5)
+                assert answers == []  # it waits for the lock ...
+                # ... on a worker thread: the event loop still answers, reads included
+                assert http.get("/healthz").status_code == 200
+                assert http.get("/v1/fleets/f2").json()["version"] == 1
+                assert answers == []
+            finally:
+                other.execute("ROLLBACK")
+                other.close()
+            poster.join(timeout=60)
+            assert [a.status_code for a in answers] == [200]
+            assert answers[0].json()["seq"] == 2
+            counted = commits(http.get("/metrics").text)
+            assert counted.get("thread", 0) == 1
+            # with the lock free again, the event loop writes the next target itself
+            before = counted.get("event_loop", 0)
+            second = http.post("/v1/fleets/f1/targets", json=targets(5, 1)[0])
+            assert second.status_code == 200 and second.json()["seq"] == 3
+            assert commits(http.get("/metrics").text).get("event_loop", 0) == before + 1
+            events = http.get("/v1/fleets/f1/events").json()["items"]
+            assert [e["seq"] for e in events] == [1, 2, 3]
+    finally:
+        server.stop()
