@@ -198,7 +198,7 @@ def upgrade(engine: Engine) -> None:
 def is_sqlite_busy(error: StorageError) -> bool:
     """Whether ``error`` (from :func:`storage_errors`) is SQLite's "database is locked"."""
     cause = error.__cause__
-    orig = getattr(cause, "orig", None)
+    orig = getattr(cause, "orig", cause)
     return isinstance(orig, sqlite3.OperationalError) and (
         "locked" in str(orig) or "busy" in str(orig)
     )
@@ -217,4 +217,9 @@ def storage_errors(what: str) -> Iterator[None]:
     except sa.exc.IntegrityError as error:
         raise Conflict(f"could not {what}: {error.orig}") from error
     except sa.exc.SQLAlchemyError as error:
+        raise StorageError(f"could not {what}: {error}") from error
+    # the write path's hot statements on SQLite use the driver directly
+    except sqlite3.IntegrityError as error:
+        raise Conflict(f"could not {what}: {error}") from error
+    except sqlite3.Error as error:
         raise StorageError(f"could not {what}: {error}") from error

@@ -8,14 +8,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from datetime import UTC, datetime
-from types import SimpleNamespace
 from typing import Any
 
 import sqlalchemy as sa
 from sqlalchemy.engine import Connection
 
 from routing_svc.errors import InvalidInput, UnknownFleet
-from routing_svc.store.records import EventRecord, NewEvent
+from routing_svc.store.records import EventRecord, NewEvent, as_utc
 from routing_svc.store.schema import ID_LENGTH, KEY_LENGTH, KIND_LENGTH, events, fleets, networks
 
 __all__ = [
@@ -129,13 +128,62 @@ def event_rows(
 
 def records_of_rows(rows: Sequence[dict[str, Any]]) -> tuple[EventRecord, ...]:
     """The :class:`EventRecord` s of rows built by :func:`event_rows`."""
-    return tuple(EventRecord.from_row(SimpleNamespace(**row)) for row in rows)
+    return tuple(
+        EventRecord(
+            fleet_id=row["fleet_id"],
+            seq=row["seq"],
+            kind=row["kind"],
+            payload_json=row["payload"],
+            result_json=row["result"],
+            idempotency_key=row["idempotency_key"],
+            request_hash=row["request_hash"],
+            created_at=as_utc(row["created_at"]),
+        )
+        for row in rows
+    )
+
+
+# The write path's hot statements on SQLite go straight to the driver: the same SQL
+# that SQLAlchemy renders for the statements above, without its per-call work.
+_SQLITE_EVENT_COLUMNS = (
+    "fleet_id", "seq", "kind", "payload", "result", "idempotency_key", "request_hash",
+    "batch_size", "created_at",
+)  # fmt: skip
+_SQLITE_INSERT_EVENTS = (
+    f"INSERT INTO events ({', '.join(_SQLITE_EVENT_COLUMNS)}) "
+    f"VALUES ({', '.join('?' for _ in _SQLITE_EVENT_COLUMNS)})"
+)
+_SQLITE_MOVE_VERSION = "UPDATE fleets SET version = ? WHERE id = ?"
+_SQLITE_MOVE_VERSION_AND_STATE = (
+    "UPDATE fleets SET version = ?, state = ?, snapshot_version = ? WHERE id = ?"
+)
+
+
+def _sqlite_driver(conn: Connection) -> Any | None:
+    """The driver's connection under ``conn`` on SQLite, else ``None``."""
+    if conn.dialect.name != "sqlite":
+        return None
+    return conn.connection.dbapi_connection
 
 
 def insert_event_rows(conn: Connection, rows: list[dict[str, Any]]) -> None:
     """Insert event rows (of any fleets) in one statement."""
-    if rows:
+    if not rows:
+        return
+    driver = _sqlite_driver(conn)
+    if driver is None:
         conn.execute(_INSERT_EVENTS, rows)
+        return
+    stamp = events.c.created_at.type.dialect_impl(conn.dialect).bind_processor(conn.dialect)
+    assert stamp is not None
+    stamps = {moment: stamp(moment) for moment in {row["created_at"] for row in rows}}
+    driver.executemany(
+        _SQLITE_INSERT_EVENTS,
+        [
+            (*(row[c] for c in _SQLITE_EVENT_COLUMNS[:-1]), stamps[row["created_at"]])
+            for row in rows
+        ],
+    )
 
 
 def move_versions(conn: Connection, moves: Sequence[tuple[str, int, str | None]]) -> None:
@@ -149,6 +197,18 @@ def move_versions(conn: Connection, moves: Sequence[tuple[str, int, str | None]]
         for fleet, version, state in moves
         if state
     ]
+    driver = _sqlite_driver(conn)
+    if driver is not None:
+        if plain:
+            driver.executemany(
+                _SQLITE_MOVE_VERSION, [(p["version"], p["fleet_key"]) for p in plain]
+            )
+        if saved:
+            driver.executemany(
+                _SQLITE_MOVE_VERSION_AND_STATE,
+                [(p["version"], p["state"], p["snapshot_version"], p["fleet_key"]) for p in saved],
+            )
+        return
     for params in (plain, saved):
         if params:
             conn.execute(_UPDATE_FLEET, params)
@@ -166,8 +226,17 @@ def lock_fleets(conn: Connection, fleet_ids: Sequence[str]) -> dict[str, int]:
     UnknownFleet
         One of the fleets does not exist or was deleted.
     """
-    rows = conn.execute(_LOCK_FLEETS, {"fleet_keys": sorted(set(fleet_ids))}).all()
-    versions = {row.id: int(row.version) for row in rows if not row.deleted}
+    keys = sorted(set(fleet_ids))
+    driver = _sqlite_driver(conn)
+    if driver is None:
+        rows = conn.execute(_LOCK_FLEETS, {"fleet_keys": keys}).all()
+        versions = {row.id: int(row.version) for row in rows if not row.deleted}
+    else:
+        marks = ", ".join("?" for _ in keys)
+        found = driver.execute(
+            f"SELECT id, version, deleted FROM fleets WHERE id IN ({marks})", keys
+        ).fetchall()
+        versions = {key: int(version) for key, version, deleted in found if not deleted}
     for fleet_id in fleet_ids:
         if fleet_id not in versions:
             raise UnknownFleet(f"no fleet {fleet_id!r}")
