@@ -87,3 +87,40 @@ def test_a_held_write_lock_sends_targets_to_a_thread_and_the_loop_keeps_serving(
             assert [e["seq"] for e in events] == [1, 2, 3]
     finally:
         server.stop()
+
+
+def test_a_fleet_deleted_elsewhere_fails_alone(tmp_path: Path) -> None:
+    """The event loop's transaction fails for the whole group; the worker thread then
+    commits fleet by fleet, so only the deleted fleet's targets fail."""
+    from routing_svc.service.fleets import FleetService
+    from routing_svc.service.networks import NetworkRegistry
+    from routing_svc.store import EventLog
+
+    db_url = f"sqlite:///{tmp_path / 'deleted.db'}"
+    server = LiveServer(db_url, tmp_path).start()
+    try:
+        with httpx.Client(base_url=server.url, timeout=60) as http:
+            for fleet_id in ("f1", "f2"):
+                http.post("/v1/fleets", json=fleet_body(fleet_id)).raise_for_status()
+                first = http.post(f"/v1/fleets/{fleet_id}/targets", json=targets(6, 1)[0])
+                assert first.status_code == 200  # both fleets are in the server's memory
+            with EventLog(db_url) as log:  # another instance deletes f2
+                registry = NetworkRegistry(data_dir=tmp_path / "networks", max_bytes=1 << 26)
+                FleetService(log, registry, recent_window=10).delete_fleet("f2")
+            bodies = [("f1" if i % 2 else "f2", t) for i, t in enumerate(targets(7, 24))]
+            with ThreadPoolExecutor(8) as pool:
+                answers = list(
+                    pool.map(
+                        lambda ft: http.post(f"/v1/fleets/{ft[0]}/targets", json=ft[1]), bodies
+                    )
+                )
+            by_fleet = {
+                f: [a.status_code for (g, _), a in zip(bodies, answers, strict=True) if g == f]
+                for f in ("f1", "f2")
+            }
+            assert by_fleet["f1"] == [200] * 12
+            assert by_fleet["f2"] == [404] * 12
+            events = http.get("/v1/fleets/f1/events").json()["items"]
+            assert [e["seq"] for e in events] == list(range(1, 15))
+    finally:
+        server.stop()
