@@ -29,7 +29,6 @@ from routing_svc.sa import Fleet, FleetConfig, Vehicle
 from routing_svc.service.networks import NetworkEntry
 from routing_svc.types import NetPosition
 
-
 _CANONICAL = json.JSONEncoder(separators=(",", ":"), sort_keys=True, allow_nan=False)
 
 
