@@ -4,7 +4,9 @@ Two backends share one schema:
 
 * **SQLite** (``sqlite:///path``), the embedded default. Every connection gets
   ``journal_mode=WAL`` (checked: an in-memory database cannot do WAL and is
-  refused), ``synchronous=FULL``, a ``busy_timeout`` and ``foreign_keys=ON``.
+  refused), ``synchronous=FULL``, a ``busy_timeout``, ``foreign_keys=ON`` and
+  no automatic checkpoints (the event log runs them on a thread:
+  :mod:`routing_svc.store.checkpoint`).
   Following the pysqlite recipe of the SQLAlchemy documentation, the driver's
   own transaction handling is switched off (``isolation_level = None``) and a
   ``begin`` hook emits ``BEGIN IMMEDIATE`` itself, so a writer takes the write
@@ -108,6 +110,8 @@ def _install_sqlite_hooks(engine: Engine, *, busy_timeout_ms: int) -> None:
                 )
             cursor.execute("PRAGMA synchronous = FULL")
             cursor.execute("PRAGMA foreign_keys = ON")
+            # checkpoints run beside the commits, see routing_svc.store.checkpoint
+            cursor.execute("PRAGMA wal_autocheckpoint = 0")
         finally:
             cursor.close()
 

@@ -39,6 +39,7 @@ from routing_svc.errors import (
 )
 from routing_svc.store import engine as store_engine
 from routing_svc.store import queries as q
+from routing_svc.store.checkpoint import WalCheckpointer
 from routing_svc.store.records import (
     AppendResult,
     EventRecord,
@@ -102,6 +103,7 @@ class EventLog:
         # here instead of in SQLite's busy handler, which sleeps between retries.
         self._sqlite_writer = threading.Lock()
         self._impatient: Connection | None = None  # see try_append_groups_uncommitted
+        self._checkpointer: WalCheckpointer | None = None
 
     # -- lifecycle -------------------------------------------------------------
 
@@ -119,11 +121,17 @@ class EventLog:
             engine.dispose()
             raise
         self._engine = engine
+        database = engine.url.database
+        if engine.dialect.name == "sqlite" and database:
+            self._checkpointer = WalCheckpointer(database).start()
         return self
 
     def close(self) -> None:
         """Release every connection. Closing twice is harmless."""
         if self._engine is not None:
+            if self._checkpointer is not None:
+                self._checkpointer.stop()
+                self._checkpointer = None
             with self._sqlite_writer:
                 self._drop_impatient_connection()
             self._engine.dispose()
