@@ -16,14 +16,16 @@ for every target. When that is not possible at once (another thread or
 process holds the write lock, a fleet's lock is taken, a fleet is not in
 memory), the group goes to a worker thread as a whole. Every other request
 (from worker threads, and all of them on PostgreSQL, whose statements wait
-on the network) joins the queue of the writer thread. Under each fleet's lock the cached
-:class:`FleetRuntime` first replays the events other workers (or hosts) wrote
-since it last looked, then computes each request's events in queue order; a
-request that fails with a domain error fails alone. Every future is resolved
-only after the transaction committed. If the shared transaction fails, each
-fleet's requests are committed on their own, so one fleet's trouble cannot
-fail another's requests; a cache that may have diverged (an append that
-failed after computing) is dropped and rebuilt from the log.
+on the network) joins the queue of the writer thread.
+
+Under each fleet's lock the cached :class:`FleetRuntime` first replays the
+events other workers (or hosts) wrote since it last looked, then computes
+each request's events in queue order; a request that fails with a domain
+error fails alone. Every future is resolved only after the transaction
+committed. If the shared transaction fails, each fleet's requests are
+committed on their own, so one fleet's trouble cannot fail another's
+requests; a cache that may have diverged (an append that failed after
+computing) is dropped and rebuilt from the log.
 """
 
 from __future__ import annotations
@@ -323,9 +325,10 @@ class FleetService:
             self._committer.shutdown(wait=True)
 
     async def drain(self) -> None:
-        """Wait until the event loop's writer has committed everything queued to it."""
+        """Wait until the event loop's writer has committed everything queued to it (its
+        errors went to the requests' futures)."""
         while self._loop_drain is not None:
-            await asyncio.shield(self._loop_drain)
+            await asyncio.wait({self._loop_drain})
 
     # -- the event loop's writer --------------------------------------------------
 
@@ -384,10 +387,16 @@ class FleetService:
                             )
                         await loop.run_in_executor(self._committer, opened.commit)
                         committed = True
-                except BaseException:
+                except Exception:
                     # computed (perhaps in part) but not durable: rebuild from the log
                     for job in jobs:
                         self._cache.pop(job.fleet_id, None)
+                except BaseException:
+                    # cancelled while the commit may be running: its outcome is unknown,
+                    # so nothing is tried again (a retry with an idempotency key finds out)
+                    for job in jobs:
+                        self._cache.pop(job.fleet_id, None)
+                    raise
                 if committed:
                     assert opened is not None
                     COMMITS.labels("event_loop").inc()
