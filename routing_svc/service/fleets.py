@@ -336,17 +336,11 @@ class FleetService:
         """Commit the event loop's queue, group after group, until it is empty."""
         try:
             while self._loop_queue:
-                batch = [self._loop_queue.popleft()]
-                total = batch[0].size
-                while self._loop_queue and total + self._loop_queue[0].size <= GROUP_CAP:
-                    total += self._loop_queue[0].size
-                    batch.append(self._loop_queue.popleft())
+                batch = _take_batch(self._loop_queue)
                 try:
                     await self._commit_on_loop(batch)
                 except BaseException as exc:  # never leave a caller waiting
-                    for pending in batch:
-                        if not pending.future.done():
-                            pending.future.set_exception(exc)
+                    _fail_unfinished(batch, exc)
                     if not isinstance(exc, Exception):
                         raise
         finally:
@@ -387,16 +381,15 @@ class FleetService:
                             )
                         await loop.run_in_executor(self._committer, opened.commit)
                         committed = True
-                except Exception:
+                except BaseException as exc:
                     # computed (perhaps in part) but not durable: rebuild from the log
                     for job in jobs:
                         self._cache.pop(job.fleet_id, None)
-                except BaseException:
-                    # cancelled while the commit may be running: its outcome is unknown,
-                    # so nothing is tried again (a retry with an idempotency key finds out)
-                    for job in jobs:
-                        self._cache.pop(job.fleet_id, None)
-                    raise
+                    if not isinstance(exc, Exception):
+                        # cancelled while the commit may be running: its outcome is
+                        # unknown, so nothing is tried again (a retry with an
+                        # idempotency key finds out)
+                        raise
                 if committed:
                     assert opened is not None
                     COMMITS.labels("event_loop").inc()
@@ -417,17 +410,11 @@ class FleetService:
                     self._queue_cond.wait()
                 if not self._queue:
                     return
-                batch = [self._queue.popleft()]
-                total = batch[0].size
-                while self._queue and total + self._queue[0].size <= GROUP_CAP:
-                    total += self._queue[0].size
-                    batch.append(self._queue.popleft())
+                batch = _take_batch(self._queue)
             try:
                 self._commit(batch)
             except BaseException as exc:  # never leave a caller waiting
-                for pending in batch:
-                    if not pending.future.done():
-                        pending.future.set_exception(exc)
+                _fail_unfinished(batch, exc)
 
     def _commit(self, batch: list[_Pending]) -> None:
         """Commit a batch: all fleets in one transaction, else fleet by fleet."""
@@ -671,3 +658,21 @@ class FleetService:
             "snapshot_identical": identical,
             "state_sha256": hashlib.sha256(runtime.snapshot_json().encode()).hexdigest(),
         }
+
+
+def _take_batch(queue: deque[_Pending]) -> list[_Pending]:
+    """Take the next batch from a non-empty ``queue``: its oldest requests, up to
+    :data:`GROUP_CAP` events (at least one request)."""
+    batch = [queue.popleft()]
+    total = batch[0].size
+    while queue and total + queue[0].size <= GROUP_CAP:
+        total += queue[0].size
+        batch.append(queue.popleft())
+    return batch
+
+
+def _fail_unfinished(batch: list[_Pending], error: BaseException) -> None:
+    """Fail every request of ``batch`` that has no answer yet."""
+    for pending in batch:
+        if not pending.future.done():
+            pending.future.set_exception(error)

@@ -433,26 +433,22 @@ class EventLog:
             return None
         try:
             conn = self._impatient_connection(what)
-            try:
-                with store_engine.storage_errors(what):
-                    conn.begin()
-            except StorageError as error:
-                if not store_engine.is_sqlite_busy(error):
-                    raise
-                self._drop_impatient_connection()
-                self._sqlite_writer.release()
-                return None
-            try:
-                with store_engine.storage_errors(what):
-                    items = _write_groups(conn, groups)
-            except BaseException:
-                conn.rollback()
-                raise
-        except BaseException:
+            with store_engine.storage_errors(what):
+                conn.begin()
+        except BaseException as error:
             self._drop_impatient_connection()
             self._sqlite_writer.release()
+            if isinstance(error, StorageError) and store_engine.is_sqlite_busy(error):
+                return None
             raise
-        return UncommittedAppend(self, conn, what, items)
+        opened = UncommittedAppend(self, conn, what, [])
+        try:
+            with store_engine.storage_errors(what):
+                opened.items = _write_groups(conn, groups)
+        except BaseException:
+            opened.rollback()  # (the connection stays open unless that fails too)
+            raise
+        return opened
 
     def _impatient_connection(self, what: str) -> Connection:
         """The SQLite connection of :meth:`try_append_groups_uncommitted`, kept open; its
@@ -602,21 +598,19 @@ class UncommittedAppend:
 
     def commit(self) -> None:
         """Commit (one ``fsync``); on failure nothing is written and the error is raised."""
-        log = self._log
-        try:
-            with store_engine.storage_errors(f"commit ({self._what})"):
-                self._conn.commit()
-        except BaseException:
-            log._drop_impatient_connection()
-            raise
-        finally:
-            log._sqlite_writer.release()
+        self._end(self._conn.commit, f"commit ({self._what})")
 
     def rollback(self) -> None:
         """Write nothing."""
+        self._end(self._conn.rollback, f"roll back ({self._what})")
+
+    def _end(self, finish: Callable[[], None], what: str) -> None:
+        """End the transaction with ``finish``; give the write lock back in any case and
+        drop the connection if that failed."""
         log = self._log
         try:
-            self._conn.rollback()
+            with store_engine.storage_errors(what):
+                finish()
         except BaseException:
             log._drop_impatient_connection()
             raise
