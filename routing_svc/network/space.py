@@ -17,6 +17,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from routing_svc.errors import InvalidInput, UnknownEdge, UnmetRequirement, Unreachable
+from routing_svc.network.columns import SearchColumns
 from routing_svc.network.compile import CompiledNetwork
 from routing_svc.network.costs import (
     CostKind,
@@ -33,12 +34,11 @@ from routing_svc.network.search import (
     STATUS_UNREACHABLE,
     Int32Array,
     SearchBuffers,
-    fleet_columns,
     nearest_vehicles,
     search_arcs,
 )
 from routing_svc.network.snapping import point_on_edge
-from routing_svc.network.twins import reverse_edges, twin, with_twins
+from routing_svc.network.twins import reverse_edges, twin
 from routing_svc.network.walking import check_route, random_walk, walk_route
 from routing_svc.sa.space import Assignment, FloatArray, IntArray, Requirement
 from routing_svc.types import NetPosition
@@ -99,6 +99,7 @@ class RoadSpace:
         self.network = network
         self._costs = EdgeCosts.free_flow(network, cost)
         self._buffers = _SharedBuffers(network)
+        self._columns = SearchColumns(network, either_way=either_way)
         self._typical: float | None = None
         self.either_way = either_way
 
@@ -108,6 +109,7 @@ class RoadSpace:
         space.network = parent.network
         space._costs = costs
         space._buffers = parent._buffers
+        space._columns = parent._columns
         space._typical = None
         space.either_way = parent.either_way
         return space
@@ -192,16 +194,15 @@ class RoadSpace:
         """Run :func:`~routing_svc.network.search.nearest_vehicles`; raise its errors."""
         net = self.network
         check_position(net, target, what="target")
-        edges, offsets = fleet_columns(positions)
+        edges, offsets = self._columns.of(positions)
         speed = np.ascontiguousarray(speeds, dtype=np.float64)
         groups, counts = _requirement_arrays(requirement, len(positions))
         if speed.shape != (len(positions),):
             raise InvalidInput("speeds must hold one value per vehicle")
         n = len(positions)
-        if self.either_way and n:
-            edges, offsets, speed, groups = with_twins(
-                reverse_edges(net), net.length, edges, offsets, speed, groups
-            )
+        if self.either_way and n:  # a twin has its vehicle's speed and group
+            speed = np.concatenate((speed, speed))
+            groups = np.concatenate((groups, groups))
         buffers = self._buffers.get()
         classes = net.end_classes
         found = nearest_vehicles(

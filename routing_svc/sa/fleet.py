@@ -19,6 +19,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from itertools import compress, count
+from operator import is_not
 from typing import Any, Generic, cast
 
 import numpy as np
@@ -176,6 +178,7 @@ class Fleet(Generic[P]):
     _speeds: np.ndarray = field(init=False, repr=False)
     _types: tuple[str, ...] = field(init=False, repr=False)
     _index: dict[str, int] = field(init=False, repr=False)
+    _any_one: Requirement = field(init=False, repr=False)
     _probe_cache: _ProbeCache[P] | None = field(init=False, repr=False, default=None)
 
     def __post_init__(self) -> None:
@@ -199,6 +202,7 @@ class Fleet(Generic[P]):
         self._speeds = np.array([v.speed for v in self.vehicles], dtype=np.float64)
         self._types = tuple(v.type for v in self.vehicles)
         self._index = {v.id: i for i, v in enumerate(self.vehicles)}
+        self._any_one, _ = build_requirement(self._types, None)
 
     @classmethod
     def create(
@@ -231,7 +235,10 @@ class Fleet(Generic[P]):
         return self.config.schedule(k)
 
     def _search(self, target: P, requires: Sequence[str] | None) -> tuple[Dispatch[P], Any]:
-        requirement, _ = build_requirement(self._types, requires)
+        if requires:
+            requirement, _ = build_requirement(self._types, requires)
+        else:
+            requirement = self._any_one
         found = self.space.assign(target, self.state.positions, self._speeds, requirement)
         ids = tuple(self.vehicles[i].id for i in found.served_by)
         dispatch: Dispatch[P] = Dispatch(
@@ -313,11 +320,10 @@ class Fleet(Generic[P]):
         probes = self._back_probes(space, window)
         # only a probe that arrives before the fleet matters: the search stops there
         times = space.arrival_times(target, probes, self._speeds, cost)
+        gains = cost - times
         backed_off: list[tuple[int, P]] = []
-        for j, time in enumerate(times.tolist()):
-            gain = cost - time
-            if gain <= _TOLERANCE * cost:
-                continue
+        for j in np.flatnonzero(~(gains <= _TOLERANCE * cost)).tolist():
+            gain = float(gains[j])
             amount = min(window, self.step_size(j) * gain / window)
             moved = space.back_off(positions[j], probes[j], amount)
             entries[j] = space.entry(positions[j], moved, None, entries[j], window)
@@ -327,18 +333,24 @@ class Fleet(Generic[P]):
 
     def _back_probes(self, space: DirectedSpace[P], window: float) -> list[P]:
         """``space.back_probes`` of the current references, recomputed only for the
-        vehicles whose reference or entry changed since the last call."""
+        vehicles whose reference or entry changed since the last call.
+
+        The list returned is the cache's own (the same object from call to call,
+        which lets the space keep its search columns): callers only read it.
+        """
         positions, entries = self.state.positions, self.state.entries
         cache = self._probe_cache
         if cache is None or cache.space is not space or cache.window != window:
             probes = space.back_probes(positions, window, entries)
             self._probe_cache = _ProbeCache(space, window, list(positions), list(entries), probes)
-            return list(probes)
-        for j, (position, entry) in enumerate(zip(positions, entries, strict=True)):
-            if position is not cache.positions[j] or entry is not cache.entries[j]:
-                (cache.probes[j],) = space.back_probes([position], window, [entry])
-                cache.positions[j], cache.entries[j] = position, entry
-        return list(cache.probes)
+            return probes
+        changed = set(compress(count(), map(is_not, positions, cache.positions)))
+        changed.update(compress(count(), map(is_not, entries, cache.entries)))
+        for j in sorted(changed):
+            position, entry = positions[j], entries[j]
+            (cache.probes[j],) = space.back_probes([position], window, [entry])
+            cache.positions[j], cache.entries[j] = position, entry
+        return cache.probes
 
     def snapshot(self) -> dict[str, Any]:
         """JSON-ready state (floats round-trip exactly through ``json``)."""

@@ -31,6 +31,7 @@ computing) is dropped and rebuilt from the log.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import hashlib
 import json
 import threading
@@ -82,21 +83,86 @@ class _Diverged(Exception):
     """A request failed after changing the runtime: nothing may be written."""
 
 
-class _Pending:
-    """One write request waiting in the service's queue."""
+Answer = tuple[list[str], int]
+"""Each event's result JSON, and the ``seq`` of the request's last event."""
 
-    __slots__ = ("compute", "digest", "fleet_id", "future", "key", "size")
+Outcome = Future[Answer] | asyncio.Future[Answer]
+"""The future of a queued request: the event loop's own for a request staged on it."""
+
+
+class _Pending:
+    """One write request waiting in the service's queue.
+
+    Its future is a :class:`concurrent.futures.Future`, or, for a request made
+    on an event loop (``loop``), a future of that loop: it is answered there
+    without a trip through another thread. Either way it is answered exactly
+    once, by :meth:`resolve` or :meth:`fail`, from any thread.
+    """
+
+    __slots__ = (
+        "compute",
+        "digest",
+        "fleet_id",
+        "future",
+        "key",
+        "loop",
+        "settled",
+        "size",
+        "thread",
+    )
 
     def __init__(
-        self, fleet_id: str, compute: Compute, key: str | None, digest: str | None, size: int
+        self,
+        fleet_id: str,
+        compute: Compute,
+        key: str | None,
+        digest: str | None,
+        size: int,
+        loop: asyncio.AbstractEventLoop | None = None,
     ) -> None:
         self.fleet_id = fleet_id
         self.compute = compute
         self.key = key
         self.digest = digest
         self.size = size
-        self.future: Future[tuple[list[str], int]] = Future()
-        self.future.set_running_or_notify_cancel()  # queued means running: no cancelling
+        self.loop = loop
+        self.settled = False
+        self.future: Outcome
+        if loop is None:
+            self.future = Future()
+            self.future.set_running_or_notify_cancel()  # queued means running: no cancelling
+        else:
+            self.future = loop.create_future()
+            self.thread = threading.get_ident()
+
+    def resolve(self, answer: Answer) -> None:
+        """Answer the request (unless it was answered already)."""
+        self._settle(answer, None)
+
+    def fail(self, error: BaseException) -> None:
+        """Fail the request with ``error`` (unless it was answered already)."""
+        self._settle(None, error)
+
+    def _settle(self, answer: Answer | None, error: BaseException | None) -> None:
+        if self.settled:
+            return
+        self.settled = True
+        if self.loop is None or threading.get_ident() == self.thread:
+            _set_future(self.future, answer, error)
+        else:
+            with contextlib.suppress(RuntimeError):  # a closed loop has no one waiting
+                self.loop.call_soon_threadsafe(_set_future, self.future, answer, error)
+
+
+def _set_future(future: Outcome, answer: Answer | None, error: BaseException | None) -> None:
+    """Set the outcome of a request's future; a loop's future that its waiter cancelled
+    (the client went away) takes none."""
+    if future.cancelled():
+        return
+    if error is not None:
+        future.set_exception(error)
+    else:
+        future.set_result(answer)  # type: ignore[arg-type]
 
 
 class _FleetJob:
@@ -125,7 +191,7 @@ class _FleetJob:
             except RoutingSvcError as exc:
                 if runtime.version != at:
                     self.diverged.append(pending)
-                    pending.future.set_exception(exc)
+                    pending.fail(exc)
                     raise _Diverged(str(exc)) from exc
                 out.append(exc)
         return out
@@ -148,10 +214,10 @@ class _FleetJob:
         COMMIT_GROUP_SIZE.observe(len(self.group))
         for pending, item in zip(self.group, items, strict=True):
             if item.error is not None:
-                pending.future.set_exception(item.error)
+                pending.fail(item.error)
             else:
                 last = item.events[-1].seq if item.events else item.version
-                pending.future.set_result(([e.result_json or "{}" for e in item.events], last))
+                pending.resolve(([e.result_json or "{}" for e in item.events], last))
         try:
             self.service._replay(self.runtime, items[0].missed)  # duplicates build nothing
         except BaseException:
@@ -257,7 +323,7 @@ class FleetService:
         digest: str | None = None,
         size: int = 1,
         loop: asyncio.AbstractEventLoop | None = None,
-    ) -> Future[tuple[list[str], int]]:
+    ) -> Outcome:
         """Queue ``compute(runtime) -> [NewEvent]`` for the next group commit.
 
         Parameters
@@ -280,12 +346,13 @@ class FleetService:
 
         Returns
         -------
-        concurrent.futures.Future
+        concurrent.futures.Future or asyncio.Future
+            A future of ``loop`` when one is given, else a concurrent one.
             Resolves, only after the transaction committed, to each event's
             result JSON and the ``seq`` of the request's last event (the
             fleet's version if it wrote none), or to the request's error.
         """
-        mine = _Pending(fleet_id, compute, idempotency_key, digest, size)
+        mine = _Pending(fleet_id, compute, idempotency_key, digest, size, loop)
         if loop is not None and self.log.dialect == "sqlite":
             if self._closed:
                 raise StorageError("the fleet service is shut down")
@@ -318,9 +385,7 @@ class FleetService:
         if writer is not None and writer is not threading.current_thread():
             writer.join()
         while self._loop_queue:
-            pending = self._loop_queue.popleft()
-            if not pending.future.done():
-                pending.future.set_exception(StorageError("the fleet service is shut down"))
+            self._loop_queue.popleft().fail(StorageError("the fleet service is shut down"))
         if self._committer is not None:
             self._committer.shutdown(wait=True)
 
@@ -399,7 +464,7 @@ class FleetService:
             for lock in held:
                 lock.release()
         if not committed:
-            rest = [p for p in batch if not p.future.done()]
+            rest = [p for p in batch if not p.settled]
             if rest:
                 await loop.run_in_executor(None, self._commit, rest)
 
@@ -466,7 +531,7 @@ class FleetService:
                 job = _FleetJob(self, fleet_id, group)
             except BaseException as exc:
                 for pending in group:
-                    pending.future.set_exception(exc)
+                    pending.fail(exc)
                 return []
             try:
                 (items,) = self.log.append_groups([job.request()])
@@ -476,8 +541,7 @@ class FleetService:
             except BaseException as exc:
                 self._cache.pop(fleet_id, None)
                 for pending in group:
-                    if not pending.future.done():
-                        pending.future.set_exception(exc)
+                    pending.fail(exc)
                 return []
             COMMITS.labels("thread").inc()
             job.settle(items)
@@ -552,7 +616,7 @@ class FleetService:
         idempotency_key: str | None = None,
         body: Any = None,
         loop: asyncio.AbstractEventLoop | None = None,
-    ) -> Future[tuple[list[str], int]]:
+    ) -> Outcome:
         """Queue targets to be applied in order in one transaction (see :meth:`submit`,
         also for ``loop``).
 
@@ -674,5 +738,4 @@ def _take_batch(queue: deque[_Pending]) -> list[_Pending]:
 def _fail_unfinished(batch: list[_Pending], error: BaseException) -> None:
     """Fail every request of ``batch`` that has no answer yet."""
     for pending in batch:
-        if not pending.future.done():
-            pending.future.set_exception(error)
+        pending.fail(error)

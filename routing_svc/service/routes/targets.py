@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
-from concurrent.futures import Future
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Header, Request, Response
@@ -14,7 +13,7 @@ from pydantic import ValidationError
 from starlette.concurrency import run_in_threadpool
 
 from routing_svc.service.deps import fleet_service
-from routing_svc.service.fleets import FleetService
+from routing_svc.service.fleets import FleetService, Outcome
 from routing_svc.service.schemas import TargetBatch, TargetSpec, TravelTimes
 
 router = APIRouter(prefix="/v1/fleets/{fleet_id}", tags=["targets"])
@@ -34,7 +33,7 @@ TARGET_RESPONSE: dict[int | str, dict[str, Any]] = {
 }
 
 
-Submit = Callable[[asyncio.AbstractEventLoop | None], Future[tuple[list[str], int]]]
+Submit = Callable[[asyncio.AbstractEventLoop | None], Outcome]
 """``submit(loop)`` queues a request (``loop``: see :meth:`FleetService.submit`)."""
 
 
@@ -44,7 +43,7 @@ def submit_target(
     target: TargetSpec,
     idempotency_key: str | None,
     loop: asyncio.AbstractEventLoop | None = None,
-) -> Future[tuple[list[str], int]]:
+) -> Outcome:
     """Queue one target of the single-target route for the service's writer.
 
     Its ``Idempotency-Key`` digest covers the target as JSON. Raises (and
@@ -119,7 +118,7 @@ async def post_target_batch(
     """Serve a list of targets in order, in one transaction."""
     body = batch.model_dump(mode="json") if idempotency_key is not None else None
 
-    def submit(loop: asyncio.AbstractEventLoop | None) -> Future[tuple[list[str], int]]:
+    def submit(loop: asyncio.AbstractEventLoop | None) -> Outcome:
         return service.submit_targets(
             fleet_id, batch.targets, idempotency_key=idempotency_key, body=body, loop=loop
         )

@@ -1,0 +1,152 @@
+"""The search's vehicle columns of position lists, kept up to date between searches.
+
+:func:`~routing_svc.network.search.nearest_vehicles` takes a fleet as arrays:
+edge indices and offsets, followed (with ``either_way``) by each vehicle's
+twin (:func:`~routing_svc.network.twins.with_twins`). A fleet searches with
+the same list of positions again and again, and between two searches only
+the vehicle that moved (and any the backward probe moved) holds a new
+position. :class:`SearchColumns` keeps the arrays of the lists it saw last
+and rewrites only the entries whose position object changed, found by
+identity, so that a search of an ``n``-vehicle fleet costs no ``O(n)``
+Python work.
+
+The arrays are exactly those that :func:`~routing_svc.network.search.fleet_columns`
+and :func:`~routing_svc.network.twins.with_twins` build from the whole list:
+changed entries go through the same two functions.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from itertools import compress, count
+from operator import is_not
+
+import numpy as np
+import numpy.typing as npt
+
+from routing_svc.network.compile import CompiledNetwork
+from routing_svc.network.search import fleet_columns
+from routing_svc.network.twins import reverse_edges, with_twins
+from routing_svc.types import NetPosition
+
+IntArray = npt.NDArray[np.int64]
+FloatArray = npt.NDArray[np.float64]
+
+__all__ = ["SearchColumns"]
+
+
+class _Entry:
+    """The columns of one list of positions and the position objects they were built from."""
+
+    __slots__ = ("edges", "items", "offsets", "source")
+
+    def __init__(
+        self,
+        source: list[NetPosition],
+        items: list[NetPosition],
+        edges: IntArray,
+        offsets: FloatArray,
+    ) -> None:
+        self.source = source
+        self.items = items
+        self.edges = edges
+        self.offsets = offsets
+
+
+class SearchColumns:
+    """Edge and offset columns (with twins) of the position lists searched lately.
+
+    Parameters
+    ----------
+    network : CompiledNetwork
+        The network the positions are on.
+    either_way : bool
+        Append every vehicle's twin (:mod:`routing_svc.network.twins`).
+    capacity : int
+        How many lists are kept (the least recently searched one goes first).
+
+    Notes
+    -----
+    A list is recognised by identity, and the entry keeps it alive, so the
+    identity cannot pass to another list. The returned arrays belong to the
+    cache: the search only reads them, and the caller must not keep them
+    past its search. Entries of one list must not be used from two threads at
+    once (a fleet searches under its lock); different lists may.
+    """
+
+    def __init__(self, network: CompiledNetwork, *, either_way: bool, capacity: int = 64) -> None:
+        self._network = network
+        self._either_way = either_way
+        self._capacity = capacity
+        self._entries: OrderedDict[int, _Entry] = OrderedDict()
+        self._guard = threading.Lock()
+        self._lengths: list[float] = network.length_values
+        self._reverse: list[int] = reverse_edges(network).tolist() if either_way else []
+
+    def of(self, positions: list[NetPosition]) -> tuple[IntArray, FloatArray]:
+        """``(edges, offsets)`` of ``positions``, each of length ``2 n`` with twins.
+
+        Raises
+        ------
+        InvalidInput
+            If a position is not a pair of an integer edge index and a number
+            (as :func:`~routing_svc.network.search.fleet_columns`).
+        """
+        key = id(positions)
+        with self._guard:
+            entry = self._entries.get(key)
+            if entry is not None:
+                self._entries.move_to_end(key)
+        n = len(positions)
+        if entry is None or entry.source is not positions or len(entry.items) != n:
+            entry = self._build(positions)
+            with self._guard:
+                self._entries[key] = entry
+                self._entries.move_to_end(key)
+                while len(self._entries) > self._capacity:
+                    self._entries.popitem(last=False)
+            return entry.edges, entry.offsets
+        changed = list(compress(count(), map(is_not, positions, entry.items)))
+        if changed:
+            self._rewrite(entry, positions, changed)
+        return entry.edges, entry.offsets
+
+    def _build(self, positions: list[NetPosition]) -> _Entry:
+        edges, offsets = self._columns(positions)
+        return _Entry(positions, list(positions), edges, offsets)
+
+    def _columns(self, positions: list[NetPosition]) -> tuple[IntArray, FloatArray]:
+        edges, offsets = fleet_columns(positions)
+        if self._either_way and len(positions):
+            net = self._network
+            n = len(positions)
+            edges, offsets, _, _ = with_twins(
+                reverse_edges(net), net.length, edges, offsets, np.ones(n), np.zeros(n, np.int64)
+            )
+        return edges, offsets
+
+    def _rewrite(self, entry: _Entry, positions: list[NetPosition], changed: list[int]) -> None:
+        """Recompute the entries ``changed`` (and their twins) from ``positions``, with
+        the arithmetic of :func:`~routing_svc.network.twins.with_twins`."""
+        n = len(entry.items)
+        edges, offsets = entry.edges, entry.offsets
+        length, rev = self._lengths, self._reverse
+        n_edges = len(length)
+        for i in changed:
+            position = positions[i]
+            e, s = position
+            if type(e) is not int or type(s) is not float:
+                column_edges, column_offsets = fleet_columns([position])  # or InvalidInput
+                e, s = int(column_edges[0]), float(column_offsets[0])
+            edges[i] = e
+            offsets[i] = s
+            if self._either_way:
+                r = rev[e] if 0 <= e < n_edges and 0.0 <= s <= length[e] else -1
+                edges[n + i] = r
+                if r >= 0:
+                    twin_length = length[r]
+                    offsets[n + i] = min(max((1.0 - s / length[e]) * twin_length, 0.0), twin_length)
+                else:
+                    offsets[n + i] = 0.0
+            entry.items[i] = position
