@@ -153,21 +153,6 @@ class CompiledNetwork:
         return int(self.fwd_indices.shape[0])
 
     @cached_property
-    def arc_keys(self) -> npt.NDArray[np.int64]:
-        """Sorted ``tail * n_edges + head`` of every arc, to test arcs with ``searchsorted``."""
-        tails = np.repeat(np.arange(self.n_edges, dtype=np.int64), np.diff(self.fwd_indptr))
-        keys = np.sort(tails * self.n_edges + self.fwd_indices)
-        keys.flags.writeable = False
-        return keys
-
-    def has_arcs(self, tails: npt.NDArray[np.int64], heads: npt.NDArray[np.int64]) -> bool:
-        """Whether every ``tails[k] -> heads[k]`` is an arc (indices must be in range)."""
-        keys = tails * self.n_edges + heads
-        found = np.searchsorted(self.arc_keys, keys)
-        inside = found < self.arc_keys.shape[0]
-        return bool(inside.all() and (self.arc_keys[found[inside]] == keys).all())
-
-    @cached_property
     def end_classes(self) -> EndStateClasses:
         """Edges grouped by successor set, the graph the nearest-vehicle search runs on.
 

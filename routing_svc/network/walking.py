@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from routing_svc.errors import InvalidInput
 from routing_svc.network.compile import CompiledNetwork
@@ -22,6 +23,7 @@ from routing_svc.types import NetPosition
 __all__ = ["check_route", "random_walk", "walk_route"]
 
 IntArray = npt.NDArray[np.int64]
+Int32Array = npt.NDArray[np.int32]
 FloatArray = npt.NDArray[np.float64]
 
 
@@ -54,23 +56,84 @@ def check_route(
         raise InvalidInput("route does not lead from the position's edge to the target's edge")
     if edges.shape[0] == 1 and position.offset > target.offset:
         raise InvalidInput("a one-edge route needs the target ahead of the position")
-    if ((edges < 0) | (edges >= network.n_edges)).any():
+    problem = _route_problem(network.fwd_indptr, network.fwd_indices, edges)
+    if problem == _OUT_OF_RANGE:
         raise InvalidInput("route holds an edge index out of range")
-    if not network.has_arcs(edges[:-1], edges[1:]):
+    if problem == _NOT_CONNECTED:
         raise InvalidInput("route holds consecutive edges that are not connected")
     return edges
 
 
-def _route_cost(segments: FloatArray) -> float:
-    """The route's cost summed in the order the search sums it (from the target back).
+_OUT_OF_RANGE = 1
+_NOT_CONNECTED = 2
 
-    ``segments`` are the costs of the first edge's rest, the intermediate
-    edges and the target edge's part. Summing them the same way makes an
-    ``amount`` equal to the cost that :meth:`RoadSpace.assign` reported land
-    exactly on the target.
+
+@njit(cache=True)
+def _route_problem(fwd_indptr: Int32Array, fwd_indices: Int32Array, edges: IntArray) -> int:
+    """0 if every edge of ``edges`` is in range and each is a successor of the one
+    before it; else :data:`_OUT_OF_RANGE` or :data:`_NOT_CONNECTED` (range first)."""
+    n_edges = fwd_indptr.shape[0] - 1
+    for e in edges:
+        if e < 0 or e >= n_edges:
+            return _OUT_OF_RANGE
+    for k in range(edges.shape[0] - 1):
+        tail, head = edges[k], edges[k + 1]
+        found = False
+        for j in range(fwd_indptr[tail], fwd_indptr[tail + 1]):
+            if fwd_indices[j] == head:
+                found = True
+                break
+        if not found:
+            return _NOT_CONNECTED
+    return 0
+
+
+@njit(cache=True)
+def _walk(
+    length: FloatArray,
+    cost: FloatArray,
+    rate: FloatArray,
+    route: IntArray,
+    start_offset: float,
+    target_offset: float,
+    spend: float,
+) -> tuple[int, float]:
+    """Where a cost ``spend`` along ``route`` (two edges or more) ends: ``(k, offset)``
+    on ``route[k]``, or ``k = -1`` at the target.
+
+    The costs spent are the rest of the first edge, the intermediate edges and
+    the target edge's part, summed in the order driven; the route's total is
+    also summed in the order the search sums it (from the target back), so
+    that an ``amount`` equal to the cost that :meth:`RoadSpace.assign`
+    reported lands exactly on the target.
     """
-    from_end = np.cumsum(segments[:0:-1])[-1]
-    return float(from_end + segments[0])
+    m = route.shape[0]
+    first = route[0]
+    last = route[m - 1]
+    segments = np.empty(m)
+    segments[0] = (length[first] - start_offset) * rate[first]
+    for j in range(1, m - 1):
+        segments[j] = cost[route[j]]
+    segments[m - 1] = target_offset * rate[last]
+    reached = np.empty(m)
+    total = segments[0]
+    reached[0] = total
+    for j in range(1, m):
+        total = total + segments[j]
+        reached[j] = total
+    from_end = segments[m - 1]
+    for j in range(m - 2, 0, -1):
+        from_end = from_end + segments[j]
+    if spend >= reached[m - 1] or spend >= from_end + segments[0]:
+        return -1, target_offset
+    k = 0
+    while k < m and reached[k] <= spend:  # the first k with reached[k] > spend
+        k += 1
+    if k == 0:
+        return 0, min(start_offset + spend / rate[first], length[first])
+    edge = route[k]
+    limit = target_offset if k == m - 1 else length[edge]
+    return k, min((spend - reached[k - 1]) / rate[edge], limit)
 
 
 def walk_route(
@@ -106,21 +169,12 @@ def walk_route(
         if spend >= (target.offset - position.offset) * t_rate:
             return target
         return NetPosition(target.edge, float(min(position.offset + spend / t_rate, target.offset)))
-    first = int(route[0])
-    segments = np.empty(route.shape[0])
-    segments[0] = (network.length[first] - position.offset) * rate[first]
-    segments[1:-1] = costs.cost[route[1:-1]]
-    segments[-1] = target.offset * rate[target.edge]
-    reached = np.cumsum(segments)
-    if spend >= reached[-1] or spend >= _route_cost(segments):
+    k, offset = _walk(
+        network.length, costs.cost, rate, route, float(position.offset), float(target.offset), spend
+    )
+    if k < 0:
         return target
-    k = int(np.searchsorted(reached, spend, side="right"))
-    if k == 0:
-        offset = min(position.offset + spend / rate[first], network.length[first])
-        return NetPosition(first, float(offset))
-    edge = int(route[k])
-    limit = target.offset if k == route.shape[0] - 1 else network.length[edge]
-    return NetPosition(edge, float(min((spend - reached[k - 1]) / rate[edge], limit)))
+    return NetPosition(int(route[k]), float(offset))
 
 
 def random_walk(

@@ -230,3 +230,57 @@ def test_with_travel_times_validates_and_leaves_the_original(drt_case: NetCase) 
             timed.with_travel_times({net.edge_ids[0]: bad})  # type: ignore[dict-item]
     with pytest.raises(InvalidInput, match="cost must be"):
         RoadSpace(net, cost="fuel")  # type: ignore[arg-type]
+
+
+def _walk_reference(
+    case: NetCase,
+    space: RoadSpace,
+    position: NetPosition,
+    target: NetPosition,
+    route: np.ndarray,
+    amount: float,
+) -> NetPosition:
+    """The walk written with numpy's cumulative sums (sequential, like the walk's loops)."""
+    net, rate, cost = case.network, space.edge_costs.rate, space.edge_costs.cost
+    if route.shape[0] == 1:
+        if amount >= (target.offset - position.offset) * rate[target.edge]:
+            return target
+        offset = min(position.offset + amount / rate[target.edge], target.offset)
+        return NetPosition(target.edge, float(offset))
+    first = int(route[0])
+    segments = np.empty(route.shape[0])
+    segments[0] = (net.length[first] - position.offset) * rate[first]
+    segments[1:-1] = cost[route[1:-1]]
+    segments[-1] = target.offset * rate[target.edge]
+    reached = np.cumsum(segments)
+    if amount >= reached[-1] or amount >= np.cumsum(segments[:0:-1])[-1] + segments[0]:
+        return target
+    k = int(np.searchsorted(reached, amount, side="right"))
+    if k == 0:
+        return NetPosition(
+            first, float(min(position.offset + amount / rate[first], net.length[first]))
+        )
+    edge = int(route[k])
+    limit = target.offset if k == route.shape[0] - 1 else net.length[edge]
+    return NetPosition(edge, float(min((amount - reached[k - 1]) / rate[edge], limit)))
+
+
+def test_advance_matches_a_numpy_walk_bit_for_bit(case: NetCase) -> None:
+    """1,000 routes (length and time costs), amounts short of, at and past the ends of
+    their edges."""
+    rng = np.random.default_rng(28)
+    for kind in ("length", "time"):
+        space = RoadSpace(case.network, cost=kind, either_way=False)
+        for _ in range(500):
+            [position, target] = case.random_positions(rng, 2)
+            result = space.assign(target, [position], np.ones(1), ONE)
+            route = np.asarray(result.route)
+            cost = result.mover_cost
+            first_rest = (case.network.length[route[0]] - position.offset) * float(
+                space.edge_costs.rate[route[0]]
+            )
+            for amount in (float(rng.uniform(0.0, cost)), first_rest, cost, 0.5 * cost):
+                expected = _walk_reference(case, space, position, target, route, amount)
+                moved = space.advance(position, target, route, amount)
+                assert moved == expected
+                assert type(moved.edge) is int and type(moved.offset) is float
