@@ -78,10 +78,11 @@ class FleetRuntime:
         outcome = self.fleet.observe(target, requires)
         seq = self.version + 1
         d = outcome.dispatch
+        described = self.entry.describe(target)
         result = {
             "seq": seq,
             "version": seq,
-            "target": self.entry.describe(target),
+            "target": described,
             "requires": list(requires) if requires else None,
             "served_by": list(d.served_by),
             "times": list(d.times),
@@ -91,7 +92,11 @@ class FleetRuntime:
             "step_size": outcome.step_size,
             "moved_by": outcome.moved_by,
             "noise": outcome.noise,
-            "new_position": self.entry.describe(outcome.new_position),
+            "new_position": (
+                described
+                if outcome.new_position is target
+                else self.entry.describe(outcome.new_position)
+            ),
             "backed_off": [
                 {"vehicle": self.fleet.vehicles[j].id, "position": self.entry.describe(p)}
                 for j, p in outcome.backed_off

@@ -39,7 +39,7 @@ def test_columns_follow_every_change_of_the_list(case: NetCase, either_way: bool
             if kind == 1:
                 fresh = NetPosition(fresh.edge, float(net.length[fresh.edge]))
             elif kind == 2:
-                fresh = NetPosition(fresh.edge, 0)  # type: ignore[arg-type]
+                fresh = NetPosition(fresh.edge, 0)
             elif kind == 3:
                 fresh = NetPosition(np.int64(fresh.edge), fresh.offset)  # type: ignore[arg-type]
             positions[i] = fresh

@@ -1,0 +1,112 @@
+"""Targets queued from an event loop are answered with that loop's own futures: on the
+loop when it commits them, from the worker thread when it cannot, and a waiter that
+goes away (a client that disconnected) changes nothing about what is written."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from routing_svc.service.fleets import Answer, Outcome
+from routing_svc.service.inprocess import InProcessFleetClient
+from routing_svc.service.schemas import TargetSpec
+from tests.service.conftest import DRT
+from tests.service.test_api import fleet_body
+from tests.service.test_durability import targets
+
+
+@pytest.fixture
+def client() -> Iterator[InProcessFleetClient]:
+    with InProcessFleetClient() as opened:  # SQLite: the loop stages what it receives
+        opened.add_network(Path(DRT), name="drt")
+        opened.create_fleet(fleet_body("a"))
+        yield opened
+
+
+def specs(seed: int, n: int) -> list[TargetSpec]:
+    return [TargetSpec.model_validate(t) for t in targets(seed, n)]
+
+
+def on_loop(future: Outcome) -> asyncio.Future[Answer]:
+    """The future of a request queued from a loop: one of that loop's."""
+    assert isinstance(future, asyncio.Future)
+    return future
+
+
+def run(coroutine: Any) -> Any:
+    """Run ``coroutine`` on a fresh loop in a thread of its own (a test's thread may
+    have a loop running already); fail on anything the loop's exception handler saw."""
+
+    def on_a_fresh_loop() -> Any:
+        loop = asyncio.new_event_loop()
+        seen: list[dict[str, Any]] = []
+        loop.set_exception_handler(lambda _, context: seen.append(context))
+        try:
+            result = loop.run_until_complete(coroutine)
+        finally:
+            loop.close()
+        assert seen == []
+        return result
+
+    with ThreadPoolExecutor(1) as thread:
+        return thread.submit(on_a_fresh_loop).result(timeout=120)
+
+
+def test_answers_come_on_the_loops_own_futures(client: InProcessFleetClient) -> None:
+    service = client.service
+
+    async def post() -> list[int]:
+        loop = asyncio.get_running_loop()
+        futures = [on_loop(service.submit_targets("a", [t], loop=loop)) for t in specs(1, 6)]
+        answers = await asyncio.gather(*futures)
+        await service.drain()
+        return [seq for _, seq in answers]
+
+    assert run(post()) == [2, 3, 4, 5, 6, 7]
+    assert client.get_fleet("a")["version"] == 7
+
+
+def test_a_group_written_by_a_worker_thread_answers_on_the_loop(
+    client: InProcessFleetClient,
+) -> None:
+    service = client.service
+    lock = service._lock_of("a")
+
+    async def post() -> list[int]:
+        loop = asyncio.get_running_loop()
+        lock.acquire()  # the loop cannot take the fleet's lock: a worker thread writes
+        threading.Timer(0.3, lock.release).start()
+        futures = [on_loop(service.submit_targets("a", [t], loop=loop)) for t in specs(2, 3)]
+        answers = await asyncio.gather(*futures)
+        await service.drain()
+        return [seq for _, seq in answers]
+
+    assert run(post()) == [2, 3, 4]
+
+
+def test_a_waiter_that_went_away_still_gets_its_target_written_once(
+    client: InProcessFleetClient,
+) -> None:
+    service = client.service
+
+    async def post() -> None:
+        loop = asyncio.get_running_loop()
+        first, second, third = (
+            on_loop(service.submit_targets("a", [t], loop=loop)) for t in specs(3, 3)
+        )
+        first.cancel()  # its client disconnected before the commit
+        assert (await second)[1] == 3 and (await third)[1] == 4
+        await service.drain()
+
+    run(post())
+    fleet = client.get_fleet("a")
+    assert fleet["version"] == 4
+    events = service.log.events("a")
+    assert [e.seq for e in events] == [1, 2, 3, 4]
+    assert [e.kind for e in events[1:]] == ["target"] * 3
