@@ -87,6 +87,7 @@ __all__ = [
     "STATUS_UNMET",
     "STATUS_UNREACHABLE",
     "SearchBuffers",
+    "arrivals_before",
     "fleet_columns",
     "nearest_vehicles",
     "search_arcs",
@@ -612,3 +613,17 @@ def nearest_vehicles(
         if veh_edge[i] >= 0:
             head[edge_class[veh_edge[i]]] = -1
     return status, detail, mover_slot, route, best_time, best_cost, best_idx
+
+
+@njit(cache=True)
+def arrivals_before(
+    n_vehicles: int, best_time: FloatArray, best_idx: Int32Array, cutoff: float
+) -> FloatArray:
+    """Per vehicle, its time in the best lists of :func:`nearest_vehicles` if it is below
+    ``cutoff``, else ``inf`` (vehicles that are in no list, or arrive later)."""
+    times = np.full(n_vehicles, np.inf)
+    for slot in range(best_idx.shape[0]):
+        vehicle = best_idx[slot]
+        if vehicle >= 0 and best_time[slot] < cutoff:
+            times[vehicle] = best_time[slot]
+    return times

@@ -34,6 +34,7 @@ from routing_svc.network.search import (
     STATUS_UNREACHABLE,
     Int32Array,
     SearchBuffers,
+    arrivals_before,
     nearest_vehicles,
     search_arcs,
 )
@@ -243,11 +244,7 @@ class RoadSpace:
         """
         n = len(positions)
         found = self._search(target, positions, speeds, _each_its_own(n), cutoff)
-        best_time, best_idx = found[4], found[6]
-        times = np.full(n, np.inf)
-        hit = (best_idx >= 0) & (best_time < cutoff)
-        times[best_idx[hit]] = best_time[hit]
-        return times
+        return arrivals_before(n, found[4], found[6], cutoff)
 
     def path_cost(self, a: NetPosition, b: NetPosition) -> float:
         """Directed cost from position ``a`` to position ``b``.
