@@ -11,8 +11,9 @@ identity, so that a search of an ``n``-vehicle fleet costs no ``O(n)``
 Python work.
 
 The arrays are exactly those that :func:`~routing_svc.network.search.fleet_columns`
-and :func:`~routing_svc.network.twins.with_twins` build from the whole list:
-changed entries go through the same two functions.
+and :func:`~routing_svc.network.twins.with_twins` build from the whole list: a changed
+entry is converted as ``fleet_columns`` converts it, and its twin is written by
+:func:`~routing_svc.network.twins.set_twins`, which ``with_twins`` uses too.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ import numpy.typing as npt
 
 from routing_svc.network.compile import CompiledNetwork
 from routing_svc.network.search import fleet_columns
-from routing_svc.network.twins import reverse_edges, with_twins
+from routing_svc.network.twins import reverse_edges, set_twins, with_twins
 from routing_svc.types import NetPosition
 
 IntArray = npt.NDArray[np.int64]
@@ -81,8 +82,6 @@ class SearchColumns:
         self._capacity = capacity
         self._entries: OrderedDict[int, _Entry] = OrderedDict()
         self._guard = threading.Lock()
-        self._lengths: list[float] = network.length_values
-        self._reverse: list[int] = reverse_edges(network).tolist() if either_way else []
 
     def of(self, positions: list[NetPosition]) -> tuple[IntArray, FloatArray]:
         """``(edges, offsets)`` of ``positions``, each of length ``2 n`` with twins.
@@ -120,33 +119,25 @@ class SearchColumns:
         edges, offsets = fleet_columns(positions)
         if self._either_way and len(positions):
             net = self._network
-            n = len(positions)
-            edges, offsets, _, _ = with_twins(
-                reverse_edges(net), net.length, edges, offsets, np.ones(n), np.zeros(n, np.int64)
-            )
+            edges, offsets = with_twins(reverse_edges(net), net.length, edges, offsets)
         return edges, offsets
 
     def _rewrite(self, entry: _Entry, positions: list[NetPosition], changed: list[int]) -> None:
-        """Recompute the entries ``changed`` (and their twins) from ``positions``, with
-        the arithmetic of :func:`~routing_svc.network.twins.with_twins`."""
-        n = len(entry.items)
-        edges, offsets = entry.edges, entry.offsets
-        length, rev = self._lengths, self._reverse
-        n_edges = len(length)
+        """Recompute the entries ``changed`` (and their twins) from ``positions``; a bad
+        position raises before anything is written."""
+        fresh: list[tuple[int, int, float]] = []
         for i in changed:
-            position = positions[i]
-            e, s = position
+            e, s = positions[i]
             if type(e) is not int or type(s) is not float:
-                column_edges, column_offsets = fleet_columns([position])  # or InvalidInput
+                column_edges, column_offsets = fleet_columns([positions[i]])  # or InvalidInput
                 e, s = int(column_edges[0]), float(column_offsets[0])
+            fresh.append((i, e, s))
+        edges, offsets = entry.edges, entry.offsets
+        for i, e, s in fresh:
             edges[i] = e
             offsets[i] = s
-            if self._either_way:
-                r = rev[e] if 0 <= e < n_edges and 0.0 <= s <= length[e] else -1
-                edges[n + i] = r
-                if r >= 0:
-                    twin_length = length[r]
-                    offsets[n + i] = min(max((1.0 - s / length[e]) * twin_length, 0.0), twin_length)
-                else:
-                    offsets[n + i] = 0.0
-            entry.items[i] = position
+            entry.items[i] = positions[i]
+        if self._either_way:
+            net = self._network
+            rows = np.array(changed, dtype=np.int64)
+            set_twins(reverse_edges(net), net.length, edges, offsets, rows)

@@ -66,44 +66,43 @@ def twin(network: CompiledNetwork, position: NetPosition) -> NetPosition | None:
 
 
 @njit(cache=True)
-def with_twins(
-    rev: IntArray,
-    length: FloatArray,
-    edges: IntArray,
-    offsets: FloatArray,
-    speeds: FloatArray,
-    groups: IntArray,
-) -> tuple[IntArray, FloatArray, FloatArray, IntArray]:
-    """The vehicle columns followed by their twins, as the search takes them.
+def set_twins(
+    rev: IntArray, length: FloatArray, edges: IntArray, offsets: FloatArray, rows: IntArray
+) -> None:
+    """Write, in place, the twin entries ``n + i`` of the vehicle entries ``i`` in ``rows``
+    of columns laid out as :func:`with_twins` lays them out (``2 n`` long).
 
-    Entry ``n + i`` is the twin of vehicle ``i`` (same speed and group), with
-    edge ``-1`` where there is none: on a one-way street, or where the
-    position itself is not on the network (the search then reports that
-    vehicle). Twin offsets are those of :func:`twin_columns`.
+    The twin's edge is ``-1`` where there is none: on a one-way street, or where the
+    position itself is not on the network (the search then reports that vehicle).
+    Twin offsets are those of :func:`twin_columns`.
     """
-    n = edges.shape[0]
+    n = edges.shape[0] // 2
     n_edges = length.shape[0]
-    out_edges = np.empty(2 * n, dtype=np.int64)
-    out_offsets = np.empty(2 * n)
-    out_speeds = np.empty(2 * n)
-    out_groups = np.empty(2 * n, dtype=np.int64)
-    for i in range(n):
+    for i in rows:
         e = edges[i]
         s = offsets[i]
-        out_edges[i] = e
-        out_offsets[i] = s
-        out_speeds[i] = speeds[i]
-        out_speeds[n + i] = speeds[i]
-        out_groups[i] = groups[i]
-        out_groups[n + i] = groups[i]
         r = -1
         if 0 <= e < n_edges and 0.0 <= s <= length[e]:
             r = rev[e]
-        out_edges[n + i] = r
+        edges[n + i] = r
         if r >= 0:
             twin_length = length[r]
             at = (1.0 - s / length[e]) * twin_length
-            out_offsets[n + i] = min(max(at, 0.0), twin_length)
+            offsets[n + i] = min(max(at, 0.0), twin_length)
         else:
-            out_offsets[n + i] = 0.0
-    return out_edges, out_offsets, out_speeds, out_groups
+            offsets[n + i] = 0.0
+
+
+@njit(cache=True)
+def with_twins(
+    rev: IntArray, length: FloatArray, edges: IntArray, offsets: FloatArray
+) -> tuple[IntArray, FloatArray]:
+    """The vehicle columns followed by their twins, as the search takes them: entry
+    ``n + i`` is the twin of vehicle ``i`` (see :func:`set_twins`)."""
+    n = edges.shape[0]
+    out_edges = np.empty(2 * n, dtype=np.int64)
+    out_offsets = np.empty(2 * n)
+    out_edges[:n] = edges
+    out_offsets[:n] = offsets
+    set_twins(rev, length, out_edges, out_offsets, np.arange(n))
+    return out_edges, out_offsets

@@ -8,19 +8,20 @@ import pytest
 from routing_svc.errors import InvalidInput
 from routing_svc.network.columns import SearchColumns
 from routing_svc.network.search import fleet_columns
-from routing_svc.network.twins import reverse_edges, with_twins
+from routing_svc.network.twins import twin_columns
 from routing_svc.types import NetPosition
 from tests.network.conftest import NetCase
 
 
-def _from_scratch(case: NetCase, positions: list[NetPosition], either_way: bool):  # type: ignore[no-untyped-def]
+def _from_scratch(
+    case: NetCase, positions: list[NetPosition], either_way: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """The columns of the whole list, twins by the numpy formulation of ``twin_columns``."""
     edges, offsets = fleet_columns(positions)
     if either_way:
-        n = len(positions)
-        net = case.network
-        edges, offsets, _, _ = with_twins(
-            reverse_edges(net), net.length, edges, offsets, np.ones(n), np.zeros(n, np.int64)
-        )
+        twin_edges, twin_offsets = twin_columns(case.network, edges, offsets)
+        edges = np.concatenate((edges, twin_edges))
+        offsets = np.concatenate((offsets, twin_offsets))
     return edges, offsets
 
 
