@@ -38,6 +38,7 @@ from routing_svc.network.search import (
     nearest_vehicles,
     search_arcs,
 )
+from routing_svc.network.serving import FleetUpdate
 from routing_svc.network.snapping import point_on_edge
 from routing_svc.network.twins import reverse_edges, twin
 from routing_svc.network.walking import check_route, random_walk, walk_route
@@ -245,6 +246,21 @@ class RoadSpace:
         n = len(positions)
         found = self._search(target, positions, speeds, _each_its_own(n), cutoff)
         return arrivals_before(n, found[4], found[6], cutoff)
+
+    def serving(self, speeds: FloatArray, window: float) -> FleetUpdate:
+        """The compiled single-target update of a fleet with these speeds
+        (:class:`~routing_svc.sa.space.SingleTargetServing`); ``window <= 0``: no probe."""
+        net = self.network
+        return FleetUpdate(
+            net,
+            self._costs,
+            self._buffers.get(),
+            search_arcs(net.end_classes, self._costs),
+            reverse_edges(net),
+            either_way=self.either_way,
+            speeds=np.ascontiguousarray(speeds, dtype=np.float64),
+            window=float(window),
+        )
 
     def path_cost(self, a: NetPosition, b: NetPosition) -> float:
         """Directed cost from position ``a`` to position ``b``.

@@ -20,7 +20,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from itertools import compress, count
-from operator import is_not
+from operator import is_not, ne
 from typing import Any, Generic, cast
 
 import numpy as np
@@ -30,7 +30,7 @@ from routing_svc.sa.annealing import Annealing
 from routing_svc.sa.objectives import Objective
 from routing_svc.sa.requirements import build_requirement
 from routing_svc.sa.schedules import Counting, Schedule, schedule_from_dict
-from routing_svc.sa.space import DirectedSpace, P, Requirement, Space
+from routing_svc.sa.space import DirectedSpace, P, Requirement, SingleTargetServing, Space
 
 _TOLERANCE = 1e-9
 """Relative gain below which a probe is taken as no better (rounding of equal paths)."""
@@ -180,6 +180,12 @@ class Fleet(Generic[P]):
     _index: dict[str, int] = field(init=False, repr=False)
     _any_one: Requirement = field(init=False, repr=False)
     _probe_cache: _ProbeCache[P] | None = field(init=False, repr=False, default=None)
+    _compiled: tuple[object, SingleTargetServing[P] | None] | None = field(
+        init=False, repr=False, default=None
+    )
+    _gammas: tuple[FleetState[P], FleetConfig, list[int], np.ndarray] | None = field(
+        init=False, repr=False, default=None
+    )
 
     def __post_init__(self) -> None:
         if not self.vehicles:
@@ -255,7 +261,18 @@ class Fleet(Generic[P]):
         return self._search(target, requires)[0]
 
     def observe(self, target: P, requires: Sequence[str] | None = None) -> Outcome[P]:
-        """Serve ``target`` and move the last-arriving vehicle toward it (eqs. (9)-(10))."""
+        """Serve ``target`` and move the last-arriving vehicle toward it (eqs. (9)-(10)).
+
+        A target for any one vehicle, without annealing noise, goes through the
+        space's compiled form of this update when it has one
+        (:class:`~routing_svc.sa.space.SingleTargetServing`), with the same result.
+        """
+        if not requires and self.config.annealing is None:
+            serving = self._serving()
+            if serving is not None:
+                outcome = self._observe_compiled(serving, target)
+                if outcome is not None:
+                    return outcome
         dispatch, found = self._search(target, requires)
         mover = found.mover
         gamma = self.step_size(mover)
@@ -289,6 +306,71 @@ class Fleet(Generic[P]):
         self.state.updates[mover] += 1
         self.state.targets += 1
         return Outcome(index, dispatch, gamma, amount, noise, old, new, tuple(backed_off))
+
+    def _serving(self) -> SingleTargetServing[P] | None:
+        """The space's compiled update for this fleet (kept per space), or ``None``."""
+        space = self.space
+        kept = self._compiled
+        if kept is not None and kept[0] is space:
+            return kept[1]
+        make = getattr(space, "serving", None)
+        window = self.config.probe
+        serving: SingleTargetServing[P] | None = None
+        if callable(make) and (window is None or (math.isfinite(window) and window > 0.0)):
+            probing = window is not None and _is_directed(type(space))
+            serving = make(self._speeds, window if probing else 0.0)
+        self._compiled = (space, serving)
+        return serving
+
+    def _observe_compiled(self, serving: SingleTargetServing[P], target: P) -> Outcome[P] | None:
+        """:meth:`observe` through the space's compiled update; ``None`` if it declined."""
+        state = self.state
+        gammas = self._step_sizes()
+        done = serving.serve(
+            target,
+            state.positions,
+            state.entries,
+            gammas,
+            self.config.objective.power,
+            _TOLERANCE,
+        )
+        if done is None:
+            return None
+        mover = done.mover
+        moved = self.vehicles[mover].id
+        time = done.completion_time
+        dispatch: Dispatch[P] = Dispatch(
+            (moved,), (time,), moved, time, self.config.objective.cost(time)
+        )
+        index = state.targets
+        state.updates[mover] += 1
+        state.targets = index + 1
+        return Outcome(
+            index,
+            dispatch,
+            float(gammas[mover]),
+            done.amount,
+            0.0,
+            done.old_position,
+            done.new_position,
+            done.backed_off,
+        )
+
+    def _step_sizes(self) -> np.ndarray:
+        """Every vehicle's :meth:`step_size`, recomputed only where its count changed."""
+        state = self.state
+        if self.config.counting is not Counting.VEHICLE:
+            return np.full(len(self.vehicles), self.step_size(0))
+        kept = self._gammas
+        if kept is None or kept[0] is not state or kept[1] is not self.config:
+            gammas = np.array([self.step_size(i) for i in range(len(self.vehicles))])
+            self._gammas = (state, self.config, list(state.updates), gammas)
+            return gammas
+        _, _, counts, gammas = kept
+        for i in compress(count(), map(ne, state.updates, counts)):
+            gammas[i] = self.step_size(i)
+            counts[i] = state.updates[i]
+        return gammas
 
     def _probing(self) -> tuple[DirectedSpace[P], float] | None:
         """The space and window of the backward probe, or ``None`` for the paper's rule."""

@@ -156,3 +156,63 @@ class DirectedSpace(Protocol[P]):
         ``previous`` the entry of ``old``; ``None`` means unknown.
         """
         ...
+
+
+@dataclass(frozen=True, slots=True)
+class Served(Generic[P]):
+    """What a :class:`SingleTargetServing` did for one target (already applied).
+
+    Attributes
+    ----------
+    mover : int
+        Index of the vehicle that served the target (and moved, unless the
+        probe moved it back).
+    completion_time : float
+        Its arrival time ``T``.
+    mover_cost : float
+        Its path cost ``D``.
+    amount : float
+        Cost it travelled toward the target (0 when the probe moved it back).
+    old_position, new_position : P
+        Its reference before and after (``new_position`` is the target itself
+        when it reached it).
+    backed_off : tuple[tuple[int, P], ...]
+        Vehicles the backward probe moved, in index order, with their new
+        references.
+    """
+
+    mover: int
+    completion_time: float
+    mover_cost: float
+    amount: float
+    old_position: P
+    new_position: P
+    backed_off: tuple[tuple[int, P], ...]
+
+
+class SingleTargetServing(Protocol[P]):
+    """A space's compiled form of :meth:`Fleet.observe` for a target that needs any one vehicle.
+
+    Optional: a space that offers it (``space.serving(speeds, window)``) does in
+    one call what the fleet would do through :meth:`Space.assign`,
+    :class:`DirectedSpace`'s probe and :meth:`Space.advance`, with bit-identical
+    results.
+    """
+
+    def serve(
+        self,
+        target: P,
+        positions: list[P],
+        entries: list[P | None],
+        gammas: FloatArray,
+        power: float,
+        tolerance: float,
+    ) -> Served[P] | None:
+        """Serve ``target`` and update ``positions`` and ``entries`` in place.
+
+        ``gammas[i]`` is vehicle ``i``'s step size for its next update, ``power``
+        the objective's ``q``, ``tolerance`` the probe's relative gain threshold.
+        ``None`` when the search reports an error: nothing changed, and the
+        fleet's own path raises it.
+        """
+        ...

@@ -1,0 +1,509 @@
+"""One target served and the fleet moved, in one compiled call.
+
+:meth:`routing_svc.sa.Fleet.observe` for a target that needs any one vehicle
+runs, on a road network, two searches (the fleet's and its back probes',
+:meth:`RoadSpace.assign` and :meth:`RoadSpace.arrival_times`), the probe's
+back-offs, the mover's step along its route (:meth:`RoadSpace.advance`) and
+its new entry (:meth:`RoadSpace.entry`). Each is a small amount of arithmetic,
+and the Python glue between them cost several times the searches. Here they
+are one numba function, :func:`serve_one`, over columns of the fleet that are
+kept between targets (:class:`FleetUpdate`).
+
+It does exactly the arithmetic of those methods, in the same order (every
+comparison, every sum), so a fleet gives bit-identical positions either way;
+``tests/network/test_network_serving.py`` checks that against the methods
+themselves over thousands of targets. Whatever it does not cover (a
+requirement of several types, annealing noise, a search that reports an
+error) is left to them.
+"""
+
+from __future__ import annotations
+
+from itertools import compress, count
+from operator import is_not
+
+import numpy as np
+import numpy.typing as npt
+from numba import njit
+
+from routing_svc.network.compile import CompiledNetwork
+from routing_svc.network.costs import EdgeCosts, check_position
+from routing_svc.network.search import (
+    STATUS_OK,
+    ArcArray,
+    Int32Array,
+    SearchBuffers,
+    arrivals_before,
+    fleet_columns,
+    nearest_vehicles,
+)
+from routing_svc.network.twins import set_twins
+from routing_svc.network.walking import _walk
+from routing_svc.sa.space import Served
+from routing_svc.types import NetPosition
+
+__all__ = ["FleetUpdate", "refresh_probes", "serve_one"]
+
+IntArray = npt.NDArray[np.int64]
+FloatArray = npt.NDArray[np.float64]
+
+_NO_EDGE = -1
+"""Edge index of an unknown entry (``None``)."""
+
+
+@njit(cache=True)
+def _probe_of(
+    rate: FloatArray, window: float, edge: int, offset: float, entry_edge: int, entry_offset: float
+) -> tuple[int, float]:
+    """One back probe, as :meth:`RoadSpace.back_probes` places it."""
+    edge_rate = rate[edge]
+    if offset * edge_rate > window:
+        return edge, offset - window / edge_rate
+    if entry_edge >= 0:
+        return entry_edge, entry_offset
+    return edge, 0.0
+
+
+@njit(cache=True)
+def refresh_probes(
+    rate: FloatArray,
+    rev: IntArray,
+    length: FloatArray,
+    window: float,
+    veh_edge: IntArray,
+    veh_offset: FloatArray,
+    entry_edge: IntArray,
+    entry_offset: FloatArray,
+    probe_edge: IntArray,
+    probe_offset: FloatArray,
+    either_way: bool,
+    rows: IntArray,
+) -> None:
+    """Rewrite the back probes (and their twins) of the vehicles ``rows``."""
+    for i in rows:
+        e, s = _probe_of(rate, window, veh_edge[i], veh_offset[i], entry_edge[i], entry_offset[i])
+        probe_edge[i] = e
+        probe_offset[i] = s
+    if either_way:
+        set_twins(rev, length, probe_edge, probe_offset, rows)
+
+
+@njit(cache=True)
+def _path_cost(
+    arc_indptr: Int32Array,
+    arcs: ArcArray,
+    edge_class: Int32Array,
+    length: FloatArray,
+    rate: FloatArray,
+    rev: IntArray,
+    dist: FloatArray,
+    pred: Int32Array,
+    touched: Int32Array,
+    heap_key: FloatArray,
+    heap_node: Int32Array,
+    head: Int32Array,
+    nxt: Int32Array,
+    either_way: bool,
+    from_edge: int,
+    from_offset: float,
+    to_edge: int,
+    to_offset: float,
+) -> float:
+    """:meth:`RoadSpace.path_cost` (``inf`` when unreachable): the search with one
+    vehicle (and its twin) of speed 1."""
+    m = 2 if either_way else 1
+    edges = np.empty(m, dtype=np.int64)
+    offsets = np.empty(m)
+    edges[0] = from_edge
+    offsets[0] = from_offset
+    if either_way:
+        set_twins(rev, length, edges, offsets, np.zeros(1, dtype=np.int64))
+    found = nearest_vehicles(
+        arc_indptr, arcs, edge_class, length, rate, to_edge, to_offset,
+        edges, offsets, np.ones(m), np.zeros(m, dtype=np.int64), np.ones(1, dtype=np.int64),
+        dist, pred, touched, heap_key, heap_node, head, nxt, 1, np.inf,
+    )  # fmt: skip
+    if found[0] != STATUS_OK:
+        return np.inf
+    return float(found[5][found[2]])
+
+
+@njit(cache=True)
+def _branches(fwd_indptr: Int32Array, rev: IntArray, either_way: bool, edge: int) -> bool:
+    """:meth:`RoadSpace._branches`: two turns at the end of ``edge``, or its twin."""
+    turns = fwd_indptr[edge + 1] - fwd_indptr[edge]
+    return turns > 1 or (either_way and rev[edge] >= 0)
+
+
+@njit(cache=True)
+def serve_one(
+    arc_indptr: Int32Array,
+    arcs: ArcArray,
+    edge_class: Int32Array,
+    fwd_indptr: Int32Array,
+    length: FloatArray,
+    cost: FloatArray,
+    rate: FloatArray,
+    rev: IntArray,
+    dist: FloatArray,
+    pred: Int32Array,
+    touched: Int32Array,
+    heap_key: FloatArray,
+    heap_node: Int32Array,
+    head: Int32Array,
+    nxt: Int32Array,
+    target_edge: int,
+    target_offset: float,
+    veh_edge: IntArray,
+    veh_offset: FloatArray,
+    speed: FloatArray,
+    anyone: IntArray,
+    one: IntArray,
+    probe_edge: IntArray,
+    probe_offset: FloatArray,
+    each_own: IntArray,
+    ones: IntArray,
+    entry_edge: IntArray,
+    entry_offset: FloatArray,
+    gammas: FloatArray,
+    power: float,
+    window: float,
+    tolerance: float,
+    either_way: bool,
+    backed: IntArray,
+) -> tuple[int, int, int, float, float, float, int, bool]:
+    """Serve one target that needs any one vehicle; move the fleet's columns in place.
+
+    The vehicle columns (``veh_edge``, ``veh_offset``, with twins when
+    ``either_way``, as the search takes them), the probes' columns (likewise)
+    and the entries (edge ``-1``: unknown) are updated in place. ``gammas``
+    holds each vehicle's step size ``gamma_k`` for its next update, ``power``
+    the objective's ``q`` (eqs. (9)-(10)), ``window`` the probe's ``h``
+    (``<= 0``: no probe, the paper's rule alone).
+
+    Returns ``(status, detail, mover, completion_time, mover_cost, amount,
+    n_backed, reached)``: the fleet search's status (anything but
+    ``STATUS_OK`` changes nothing), the mover, its time and path cost, the
+    cost it travelled, how many vehicles the probe moved back (their indices,
+    in order, are ``backed[:n_backed]``) and whether the mover reached the
+    target exactly. The mover's new position and entry are in the columns.
+    """
+    n = entry_edge.shape[0]
+    found = nearest_vehicles(
+        arc_indptr, arcs, edge_class, length, rate, target_edge, target_offset,
+        veh_edge, veh_offset, speed, anyone, one,
+        dist, pred, touched, heap_key, heap_node, head, nxt, n, np.inf,
+    )  # fmt: skip
+    status, detail, mover_slot, route = found[0], found[1], found[2], found[3]
+    if status != STATUS_OK:
+        return status, detail, -1, np.nan, np.nan, 0.0, 0, False
+    mover = int(found[6][mover_slot])
+    completion = found[4][mover_slot]
+    mover_cost = found[5][mover_slot]
+    mover_speed = speed[mover]
+    gamma = gammas[mover]
+    if power == 1.0:  # Objective.step_amount
+        amount = gamma / mover_speed
+    else:
+        amount = gamma * (mover_cost / mover_speed) ** (power - 1.0) / mover_speed
+    amount = min(mover_cost, amount)
+    probing = window > 0.0
+    rows = np.empty(1, dtype=np.int64)
+
+    n_backed = 0
+    if probing:  # Fleet._probe
+        near = nearest_vehicles(
+            arc_indptr, arcs, edge_class, length, rate, target_edge, target_offset,
+            probe_edge, probe_offset, speed, each_own, ones,
+            dist, pred, touched, heap_key, heap_node, head, nxt, n, completion,
+        )  # fmt: skip
+        times = arrivals_before(n, near[4], near[6], completion)
+        bar = tolerance * completion
+        for j in range(n):
+            gain = completion - times[j]
+            if gain <= bar:
+                continue
+            step = min(window, gammas[j] * gain / window)
+            e, s = veh_edge[j], veh_offset[j]  # RoadSpace.back_off
+            edge_rate = rate[e]
+            if probe_edge[j] == e:
+                moved_e, moved_s = e, max(probe_offset[j], s - step / edge_rate)
+            elif step >= s * edge_rate:
+                moved_e, moved_s = probe_edge[j], probe_offset[j]
+            else:
+                moved_e, moved_s = e, s - step / edge_rate
+            if moved_e != e:  # RoadSpace.entry without a route: unknown on another edge
+                entry_edge[j] = _NO_EDGE
+                entry_offset[j] = 0.0
+            veh_edge[j] = moved_e
+            veh_offset[j] = moved_s
+            rows[0] = j
+            if either_way:
+                set_twins(rev, length, veh_edge, veh_offset, rows)
+            refresh_probes(
+                rate, rev, length, window, veh_edge, veh_offset, entry_edge, entry_offset,
+                probe_edge, probe_offset, either_way, rows,
+            )  # fmt: skip
+            backed[n_backed] = j
+            n_backed += 1
+            if j == mover:
+                amount = 0.0
+
+    reached = False
+    if amount > 0.0:  # RoadSpace.advance
+        start_e, start_s = veh_edge[mover], veh_offset[mover]
+        e, s = start_e, start_s
+        new_e, new_s = target_edge, target_offset
+        if either_way and route[0] != e and veh_edge[n + mover] == route[0]:
+            e, s = veh_edge[n + mover], veh_offset[n + mover]
+        if route.shape[0] == 1:  # walk_route
+            t_rate = rate[target_edge]
+            if amount >= (target_offset - s) * t_rate:
+                reached = True
+            else:
+                new_e, new_s = target_edge, min(s + amount / t_rate, target_offset)
+        else:
+            k, at = _walk(length, cost, rate, route, s, target_offset, amount)
+            if k < 0:
+                reached = True
+            else:
+                new_e, new_s = route[k], at
+        if reached:
+            new_e, new_s = target_edge, target_offset
+        if probing:
+            _move_entry(
+                arc_indptr, arcs, edge_class, fwd_indptr, length, cost, rate, rev,
+                dist, pred, touched, heap_key, heap_node, head, nxt, either_way,
+                start_e, start_s, new_e, new_s, route, entry_edge, entry_offset, mover, window,
+            )  # fmt: skip
+        veh_edge[mover] = new_e
+        veh_offset[mover] = new_s
+        rows[0] = mover
+        if either_way:
+            set_twins(rev, length, veh_edge, veh_offset, rows)
+        if probing:
+            refresh_probes(
+                rate, rev, length, window, veh_edge, veh_offset, entry_edge, entry_offset,
+                probe_edge, probe_offset, either_way, rows,
+            )  # fmt: skip
+    return STATUS_OK, 0, mover, completion, mover_cost, amount, n_backed, reached
+
+
+@njit(cache=True)
+def _move_entry(
+    arc_indptr: Int32Array,
+    arcs: ArcArray,
+    edge_class: Int32Array,
+    fwd_indptr: Int32Array,
+    length: FloatArray,
+    cost: FloatArray,
+    rate: FloatArray,
+    rev: IntArray,
+    dist: FloatArray,
+    pred: Int32Array,
+    touched: Int32Array,
+    heap_key: FloatArray,
+    heap_node: Int32Array,
+    head: Int32Array,
+    nxt: Int32Array,
+    either_way: bool,
+    old_e: int,
+    old_s: float,
+    new_e: int,
+    new_s: float,
+    route: IntArray,
+    entry_edge: IntArray,
+    entry_offset: FloatArray,
+    i: int,
+    window: float,
+) -> None:
+    """Set vehicle ``i``'s entry after a move along ``route`` (:meth:`RoadSpace.entry`)."""
+    if new_e == old_e and new_s >= old_s:
+        return
+    k = 0
+    for j in range(route.shape[0] - 1, 0, -1):
+        if route[j] == new_e:
+            k = j
+            break
+    if k == 0:
+        if new_e != old_e:
+            entry_edge[i] = _NO_EDGE
+            entry_offset[i] = 0.0
+        return
+    behind = new_s * rate[new_e]
+    best = _NO_EDGE
+    for j in range(k - 1, -1, -1):
+        edge = route[j]
+        if _branches(fwd_indptr, rev, either_way, edge) and (best < 0 or behind <= window):
+            best = edge
+        if behind > window and best >= 0:
+            entry_edge[i] = best
+            entry_offset[i] = length[best]
+            return
+        behind += cost[edge]
+    if entry_edge[i] >= 0:
+        to_previous = _path_cost(
+            arc_indptr, arcs, edge_class, length, rate, rev,
+            dist, pred, touched, heap_key, heap_node, head, nxt, either_way,
+            entry_edge[i], entry_offset[i], new_e, new_s,
+        )  # fmt: skip
+        if to_previous < np.inf and (to_previous <= window or best < 0):
+            return
+    entry_edge[i] = best
+    entry_offset[i] = length[best] if best >= 0 else 0.0
+
+
+class FleetUpdate:
+    """The columns of one fleet's positions, entries and probes, kept for :func:`serve_one`.
+
+    Parameters
+    ----------
+    network, costs, buffers, arcs
+        The space's graph, edge costs, search buffers and search arcs.
+    rev : IntArray
+        The network's reverse edges (:func:`~routing_svc.network.twins.reverse_edges`).
+    either_way : bool
+        Vehicles may leave in either direction (twins).
+    speeds : FloatArray
+        The vehicles' speeds.
+    window : float
+        The probe's window, ``<= 0`` for none.
+
+    Notes
+    -----
+    The lists given to :meth:`serve` are the fleet's own: they are updated in
+    place, and compared by identity with what the columns were built from, so
+    that a change made elsewhere (another kind of update, a restore) is picked
+    up before the next search.
+    """
+
+    def __init__(
+        self,
+        network: CompiledNetwork,
+        costs: EdgeCosts,
+        buffers: SearchBuffers,
+        arcs: ArcArray,
+        rev: IntArray,
+        *,
+        either_way: bool,
+        speeds: FloatArray,
+        window: float,
+    ) -> None:
+        self.network = network
+        self.costs = costs
+        self.either_way = either_way
+        self.window = window
+        n = speeds.shape[0]
+        self._n = n
+        self._buffers = buffers
+        self._arcs = arcs
+        self._rev = rev
+        self._speed = np.concatenate((speeds, speeds)) if either_way else speeds.copy()
+        self._anyone = np.zeros(self._speed.shape[0], dtype=np.int64)
+        self._one = np.ones(1, dtype=np.int64)
+        own = np.arange(n, dtype=np.int64)
+        self._each_own = np.concatenate((own, own)) if either_way else own
+        self._ones = np.ones(n, dtype=np.int64)
+        self._backed = np.empty(n, dtype=np.int64)
+        width = self._speed.shape[0]
+        self._veh_edge = np.zeros(width, dtype=np.int64)
+        self._veh_offset = np.zeros(width)
+        self._probe_edge = np.zeros(width, dtype=np.int64)
+        self._probe_offset = np.zeros(width)
+        self._entry_edge = np.full(n, _NO_EDGE, dtype=np.int64)
+        self._entry_offset = np.zeros(n)
+        self._positions: list[NetPosition] | None = None
+        self._entries: list[NetPosition | None] = []
+        self._seen: list[NetPosition | None] = []
+        self._seen_entries: list[NetPosition | None] = []
+
+    def _sync(self, positions: list[NetPosition], entries: list[NetPosition | None]) -> None:
+        """Bring the columns up to date with the lists (rows whose objects changed)."""
+        if self._positions is not positions or self._entries is not entries:
+            self._positions, self._entries = positions, entries
+            self._seen = [None] * self._n
+            self._seen_entries = [_UNSEEN] * self._n
+        changed = set(compress(count(), map(is_not, positions, self._seen)))
+        changed.update(compress(count(), map(is_not, entries, self._seen_entries)))
+        if not changed:
+            return
+        rows = np.fromiter(sorted(changed), dtype=np.int64, count=len(changed))
+        for i in rows.tolist():  # before anything is written
+            check_position(self.network, positions[i], what=f"vehicle {i}")
+            if entries[i] is not None:
+                check_position(self.network, entries[i], what=f"entry of vehicle {i}")
+        edges, offsets = fleet_columns([positions[i] for i in rows.tolist()])
+        self._veh_edge[rows] = edges
+        self._veh_offset[rows] = offsets
+        for i in rows.tolist():
+            entry = entries[i]
+            self._entry_edge[i] = _NO_EDGE if entry is None else entry.edge
+            self._entry_offset[i] = 0.0 if entry is None else entry.offset
+            self._seen[i] = positions[i]
+            self._seen_entries[i] = entry
+        rate, length = self.costs.rate, self.network.length
+        if self.either_way:
+            set_twins(self._rev, length, self._veh_edge, self._veh_offset, rows)
+        if self.window > 0.0:
+            refresh_probes(
+                rate, self._rev, length, self.window, self._veh_edge, self._veh_offset,
+                self._entry_edge, self._entry_offset, self._probe_edge, self._probe_offset,
+                self.either_way, rows,
+            )  # fmt: skip
+
+    def serve(
+        self,
+        target: NetPosition,
+        positions: list[NetPosition],
+        entries: list[NetPosition | None],
+        gammas: FloatArray,
+        power: float,
+        tolerance: float,
+    ) -> Served[NetPosition] | None:
+        """Serve ``target`` (checked to lie on the network) and move the fleet in place.
+
+        ``None``: the search reported an error; nothing changed (the caller's
+        own path then raises it).
+        """
+        self._sync(positions, entries)
+        net, costs, buffers = self.network, self.costs, self._buffers
+        classes = net.end_classes
+        veh_edge, veh_offset = self._veh_edge, self._veh_offset
+        entry_edge, entry_offset = self._entry_edge, self._entry_offset
+        status, _, mover, completion, mover_cost, amount, n_backed, reached = serve_one(
+            classes.arc_indptr, self._arcs, classes.edge_class, net.fwd_indptr,
+            net.length, costs.cost, costs.rate, self._rev,
+            buffers.dist, buffers.pred, buffers.touched, buffers.heap_key, buffers.heap_node,
+            buffers.head, buffers.vehicle_links(veh_edge.shape[0]),
+            target.edge, target.offset, veh_edge, veh_offset, self._speed, self._anyone,
+            self._one, self._probe_edge, self._probe_offset, self._each_own, self._ones,
+            entry_edge, entry_offset, gammas, power, self.window, tolerance, self.either_way,
+            self._backed,
+        )  # fmt: skip
+        if status != STATUS_OK:
+            return None
+        seen, seen_entries = self._seen, self._seen_entries
+        old = positions[mover]
+        backed_off: list[tuple[int, NetPosition]] = []
+        for j in self._backed[:n_backed].tolist():
+            moved = NetPosition(int(veh_edge[j]), float(veh_offset[j]))
+            positions[j] = seen[j] = moved
+            entries[j] = seen_entries[j] = self._entry(j)
+            backed_off.append((j, moved))
+        if amount > 0.0:
+            new = target if reached else NetPosition(int(veh_edge[mover]), float(veh_offset[mover]))
+            positions[mover] = seen[mover] = new
+            entries[mover] = seen_entries[mover] = self._entry(mover)
+        return Served(
+            mover, completion, mover_cost, amount, old, positions[mover], tuple(backed_off)
+        )
+
+    def _entry(self, i: int) -> NetPosition | None:
+        edge = int(self._entry_edge[i])
+        if edge < 0:
+            return None
+        return NetPosition(edge, float(self._entry_offset[i]))
+
+
+_UNSEEN = NetPosition(-1, -1.0)
+"""Marks an entry the columns hold nothing for (``None`` is a valid entry)."""
