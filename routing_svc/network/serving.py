@@ -423,6 +423,8 @@ class FleetUpdate:
             self._positions, self._entries = positions, entries
             self._seen = [None] * self._n
             self._seen_entries = [_UNSEEN] * self._n
+        if positions == self._seen and entries == self._seen_entries:
+            return  # equal lists (compared by identity first) need no rewrite
         changed = set(compress(count(), map(is_not, positions, self._seen)))
         changed.update(compress(count(), map(is_not, entries, self._seen_entries)))
         if not changed:

@@ -51,9 +51,10 @@ from routing_svc.errors import (
     UnknownFleet,
     UnknownNetwork,
 )
+from routing_svc.service.canonical import dumps
 from routing_svc.service.creation import build_created_payload
 from routing_svc.service.networks import NetworkEntry, NetworkRegistry
-from routing_svc.service.runtime import FleetRuntime, dumps
+from routing_svc.service.runtime import FleetRuntime
 from routing_svc.service.schemas import FleetSpec, TargetSpec
 from routing_svc.store import EventLog, EventRecord, FleetGroup, GroupItem, NewEvent
 from routing_svc.types import NetPosition

@@ -26,19 +26,9 @@ from routing_svc.demand import DemandDistribution
 from routing_svc.errors import Conflict, InvalidInput, ReplayMismatch
 from routing_svc.network import RoadSpace
 from routing_svc.sa import Fleet, FleetConfig, Vehicle
+from routing_svc.service.canonical import dumps, target_result_json
 from routing_svc.service.networks import NetworkEntry
 from routing_svc.types import NetPosition
-
-_CANONICAL = json.JSONEncoder(separators=(",", ":"), sort_keys=True, allow_nan=False)
-
-
-def dumps(data: Any) -> str:
-    """Canonical JSON text (exact float round trip, stable key order).
-
-    What ``json.dumps(data, separators=(",", ":"), sort_keys=True,
-    allow_nan=False)`` gives, with one encoder kept instead of one per call.
-    """
-    return _CANONICAL.encode(data)
 
 
 class FleetRuntime:
@@ -79,34 +69,33 @@ class FleetRuntime:
         seq = self.version + 1
         d = outcome.dispatch
         described = self.entry.describe(target)
-        result = {
-            "seq": seq,
-            "version": seq,
-            "target": described,
-            "requires": list(requires) if requires else None,
-            "served_by": list(d.served_by),
-            "times": list(d.times),
-            "moved": d.moved,
-            "cost": d.cost,
-            "objective": d.objective,
-            "step_size": outcome.step_size,
-            "moved_by": outcome.moved_by,
-            "noise": outcome.noise,
-            "new_position": (
+        required = list(requires) if requires else None
+        result = target_result_json(
+            seq=seq,
+            target=described,
+            requires=required,
+            served_by=d.served_by,
+            times=d.times,
+            moved=d.moved,
+            cost=d.cost,
+            objective=d.objective,
+            step_size=outcome.step_size,
+            moved_by=outcome.moved_by,
+            noise=outcome.noise,
+            new_position=(
                 described
                 if outcome.new_position is target
                 else self.entry.describe(outcome.new_position)
             ),
-            "backed_off": [
-                {"vehicle": self.fleet.vehicles[j].id, "position": self.entry.describe(p)}
-                for j, p in outcome.backed_off
+            backed_off=[
+                (self.fleet.vehicles[j].id, self.entry.describe(p)) for j, p in outcome.backed_off
             ],
-        }
-        payload = {"target": self.base_space.encode(target), "requires": result["requires"]}
+        )
+        payload = {"target": self.base_space.encode(target), "requires": required}
         self.version = seq
         self.cost_sum += d.cost
         self.recent.append(d.cost)
-        return dumps(payload), dumps(result)
+        return dumps(payload), result
 
     def apply_travel_times(self, times: dict[str, float]) -> tuple[str, str]:
         """Replace per-edge travel times (only for ``cost = time``)."""

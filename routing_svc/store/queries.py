@@ -6,12 +6,13 @@ caller's transaction and never commits.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import functools
+from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
 from typing import Any
 
 import sqlalchemy as sa
-from sqlalchemy.engine import Connection
+from sqlalchemy.engine import Connection, Dialect
 
 from routing_svc.errors import InvalidInput, UnknownFleet
 from routing_svc.store.records import EventRecord, NewEvent, as_utc
@@ -166,6 +167,14 @@ def _sqlite_driver(conn: Connection) -> Any | None:
     return conn.connection.dbapi_connection
 
 
+@functools.lru_cache(maxsize=8)
+def _created_at_processor(dialect: Dialect) -> Callable[[Any], Any]:
+    """How ``dialect`` binds an ``events.created_at`` value (built once per dialect)."""
+    stamp = events.c.created_at.type.dialect_impl(dialect).bind_processor(dialect)
+    assert stamp is not None
+    return stamp
+
+
 def insert_event_rows(conn: Connection, rows: list[dict[str, Any]]) -> None:
     """Insert event rows (of any fleets) in one statement."""
     if not rows:
@@ -174,8 +183,7 @@ def insert_event_rows(conn: Connection, rows: list[dict[str, Any]]) -> None:
     if driver is None:
         conn.execute(_INSERT_EVENTS, rows)
         return
-    stamp = events.c.created_at.type.dialect_impl(conn.dialect).bind_processor(conn.dialect)
-    assert stamp is not None
+    stamp = _created_at_processor(conn.dialect)
     stamps = {moment: stamp(moment) for moment in {row["created_at"] for row in rows}}
     driver.executemany(
         _SQLITE_INSERT_EVENTS,

@@ -1,0 +1,199 @@
+"""Canonical JSON of events, and the result of a target event written from a template.
+
+Every event's payload and result are stored as canonical JSON (:func:`dumps`:
+sorted keys, no spaces, ASCII, floats that round-trip exactly), which replay
+compares byte for byte. A target's result is also the answer to the client.
+
+Encoding a target's result dict cost the service more than its search: the
+generic encoder walks the dict and formats every float, and several floats
+repeat (for the routing objective the cost is also the objective and the
+time). :func:`target_result_json` writes the same text from a fixed template.
+Anything the template does not cover (a value that is not a plain finite
+float, int or string, a position described with other keys) goes to the
+canonical encoder, which also raises for NaN and infinity.
+``tests/service/test_canonical.py`` checks the template against the encoder.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from json.encoder import encode_basestring_ascii
+from typing import Any
+
+__all__ = ["dumps", "target_result", "target_result_json"]
+
+_CANONICAL = json.JSONEncoder(separators=(",", ":"), sort_keys=True, allow_nan=False)
+
+
+def dumps(data: Any) -> str:
+    """Canonical JSON text (exact float round trip, stable key order).
+
+    What ``json.dumps(data, separators=(",", ":"), sort_keys=True,
+    allow_nan=False)`` gives, with one encoder kept instead of one per call.
+    """
+    return _CANONICAL.encode(data)
+
+
+_text = encode_basestring_ascii
+_float_repr = float.__repr__
+
+
+class _Untemplated(Exception):
+    """A value the template does not write; the canonical encoder does."""
+
+
+def _number(value: object) -> str:
+    if type(value) is float and value - value == 0.0:  # finite
+        return _float_repr(value)
+    if type(value) is int:
+        return int.__repr__(value)
+    raise _Untemplated
+
+
+def _same_float(a: object, b: float) -> bool:
+    """Whether ``a`` is written exactly as the float ``b`` (equal, and the same zero)."""
+    return (
+        type(a) is float and a == b and (b != 0.0 or math.copysign(1.0, a) == math.copysign(1.0, b))
+    )
+
+
+def _string(value: object) -> str:
+    if type(value) is not str:
+        raise _Untemplated
+    return _text(value)
+
+
+def _position(described: dict[str, Any]) -> str:
+    """``{"edge", "offset", "x", "y"}`` with ``"lon", "lat"`` or without, keys sorted."""
+    if len(described) == 6:
+        return (
+            f'{{"edge":{_string(described["edge"])},"lat":{_number(described["lat"])},'
+            f'"lon":{_number(described["lon"])},"offset":{_number(described["offset"])},'
+            f'"x":{_number(described["x"])},"y":{_number(described["y"])}}}'
+        )
+    if len(described) == 4:
+        return (
+            f'{{"edge":{_string(described["edge"])},"offset":{_number(described["offset"])},'
+            f'"x":{_number(described["x"])},"y":{_number(described["y"])}}}'
+        )
+    raise _Untemplated
+
+
+def target_result(
+    *,
+    seq: int,
+    target: dict[str, Any],
+    requires: list[str] | None,
+    served_by: Sequence[str],
+    times: Sequence[float],
+    moved: str,
+    cost: float,
+    objective: float,
+    step_size: float,
+    moved_by: float,
+    noise: float,
+    new_position: dict[str, Any],
+    backed_off: Sequence[tuple[str, dict[str, Any]]],
+) -> dict[str, Any]:
+    """The result of a target event as a dict (what :func:`target_result_json` writes)."""
+    return {
+        "seq": seq,
+        "version": seq,
+        "target": target,
+        "requires": requires,
+        "served_by": list(served_by),
+        "times": list(times),
+        "moved": moved,
+        "cost": cost,
+        "objective": objective,
+        "step_size": step_size,
+        "moved_by": moved_by,
+        "noise": noise,
+        "new_position": new_position,
+        "backed_off": [{"position": p, "vehicle": v} for v, p in backed_off],
+    }
+
+
+def target_result_json(
+    *,
+    seq: int,
+    target: dict[str, Any],
+    requires: list[str] | None,
+    served_by: Sequence[str],
+    times: Sequence[float],
+    moved: str,
+    cost: float,
+    objective: float,
+    step_size: float,
+    moved_by: float,
+    noise: float,
+    new_position: dict[str, Any],
+    backed_off: Sequence[tuple[str, dict[str, Any]]],
+) -> str:
+    """``dumps(target_result(...))``, written from a template.
+
+    Raises
+    ------
+    ValueError
+        For a NaN or infinite float (as the canonical encoder does).
+    """
+    try:
+        cost_text = _number(cost)
+        seq_text = _number(seq)
+        target_text = _position(target)
+        return "".join(
+            (
+                '{"backed_off":[',
+                ",".join(
+                    f'{{"position":{_position(p)},"vehicle":{_string(v)}}}' for v, p in backed_off
+                ),
+                '],"cost":',
+                cost_text,
+                ',"moved":',
+                _string(moved),
+                ',"moved_by":',
+                _number(moved_by),
+                ',"new_position":',
+                target_text if new_position is target else _position(new_position),
+                ',"noise":',
+                _number(noise),
+                ',"objective":',
+                cost_text if _same_float(objective, cost) else _number(objective),
+                ',"requires":',
+                "null" if requires is None else f"[{','.join(map(_string, requires))}]",
+                ',"seq":',
+                seq_text,
+                ',"served_by":[',
+                ",".join(map(_string, served_by)),
+                '],"step_size":',
+                _number(step_size),
+                ',"target":',
+                target_text,
+                ',"times":[',
+                ",".join(cost_text if _same_float(t, cost) else _number(t) for t in times),
+                '],"version":',
+                seq_text,
+                "}",
+            )
+        )
+    except _Untemplated:
+        pass
+    return dumps(
+        target_result(
+            seq=seq,
+            target=target,
+            requires=requires,
+            served_by=served_by,
+            times=times,
+            moved=moved,
+            cost=cost,
+            objective=objective,
+            step_size=step_size,
+            moved_by=moved_by,
+            noise=noise,
+            new_position=new_position,
+            backed_off=backed_off,
+        )
+    )

@@ -1,0 +1,128 @@
+"""A target's result written from the template is exactly the canonical JSON of its dict."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+
+from routing_svc.service.canonical import dumps, target_result, target_result_json
+
+_STRINGS = ["v01", "-157539101#0", 'quote"back\\slash', "Zürich/Straße", "tab\tnew\nline", "🚕"]
+
+
+def _float(rng: np.random.Generator) -> float:
+    """Floats of every kind the encoder writes differently: exponents, zeros, integers."""
+    kind = rng.integers(7)
+    if kind == 0:
+        while True:  # any finite double, from random bits
+            value = float(rng.integers(0, 2**63, dtype=np.int64).view(np.float64))
+            if math.isfinite(value):
+                return value * (1 if rng.random() < 0.5 else -1)
+    if kind == 1:
+        return float(rng.choice([0.0, -0.0, 1.0, 1e-5, 1e16, 1.5e-300, 123456789.0]))
+    if kind == 2:
+        return float(np.round(rng.uniform(0, 1e4), int(rng.integers(0, 6))))
+    return float(rng.uniform(0.0, 10.0 ** rng.integers(-6, 18)))
+
+
+def _position(rng: np.random.Generator) -> dict[str, Any]:
+    described: dict[str, Any] = {
+        "edge": str(rng.choice(_STRINGS)),
+        "offset": _float(rng),
+        "x": _float(rng),
+        "y": _float(rng),
+    }
+    if rng.random() < 0.7:
+        described["lon"], described["lat"] = _float(rng), _float(rng)
+    return described
+
+
+def _arguments(rng: np.random.Generator) -> dict[str, Any]:
+    cost = _float(rng)
+    target = _position(rng)
+    n_served = int(rng.integers(1, 4))
+    kind = rng.integers(3)
+    objective = cost if kind == 0 else float(cost**1.0) if kind == 1 else _float(rng)
+    return {
+        "seq": int(rng.integers(2, 10**12)),
+        "target": target,
+        "requires": None if rng.random() < 0.6 else [str(rng.choice(_STRINGS)) for _ in range(2)],
+        "served_by": [str(rng.choice(_STRINGS)) for _ in range(n_served)],
+        "times": [cost if rng.random() < 0.5 else _float(rng) for _ in range(n_served)],
+        "moved": str(rng.choice(_STRINGS)),
+        "cost": cost,
+        "objective": objective,
+        "step_size": _float(rng),
+        "moved_by": _float(rng),
+        "noise": 0.0 if rng.random() < 0.8 else _float(rng),
+        "new_position": target if rng.random() < 0.2 else _position(rng),
+        "backed_off": [
+            (str(rng.choice(_STRINGS)), _position(rng)) for _ in range(int(rng.integers(0, 3)))
+        ],
+    }
+
+
+def test_template_writes_the_canonical_json() -> None:
+    rng = np.random.default_rng(11)
+    for _ in range(20_000):
+        arguments = _arguments(rng)
+        text = target_result_json(**arguments)
+        assert text == dumps(target_result(**arguments))
+        assert json.loads(text)["cost"] == arguments["cost"]
+
+
+def test_the_dict_is_the_result_the_api_documents() -> None:
+    rng = np.random.default_rng(12)
+    arguments = _arguments(rng)
+    arguments["backed_off"] = [("v07", arguments["target"])]
+    result = json.loads(target_result_json(**arguments))
+    assert result["seq"] == result["version"] == arguments["seq"]
+    assert result["backed_off"] == [{"vehicle": "v07", "position": arguments["target"]}]
+    assert set(result) == {
+        "seq", "version", "target", "requires", "served_by", "times", "moved", "cost",
+        "objective", "step_size", "moved_by", "noise", "new_position", "backed_off",
+    }  # fmt: skip
+
+
+def test_same_zero_is_not_taken_for_the_other() -> None:
+    rng = np.random.default_rng(13)
+    arguments = _arguments(rng)
+    arguments.update(cost=0.0, objective=-0.0, times=[-0.0])
+    text = target_result_json(**arguments)
+    assert '"cost":0.0' in text and '"objective":-0.0' in text and '"times":[-0.0]' in text
+    assert text == dumps(target_result(**arguments))
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"cost": math.nan},
+        {"moved_by": math.inf},
+        {"step_size": -math.inf},
+        {"times": [math.nan]},
+    ],
+)
+def test_nan_and_infinity_raise_like_the_encoder(change: dict[str, Any]) -> None:
+    arguments = {**_arguments(np.random.default_rng(14)), **change}
+    with pytest.raises(ValueError, match="JSON compliant"):
+        target_result_json(**arguments)
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"cost": np.float64(3.25)},  # a float subclass
+        {"step_size": 2},  # an int
+        {"noise": True},  # a bool is not an int here
+        {"moved": None},
+        {"target": {"edge": "e", "offset": 1.0, "x": 2.0, "y": 3.0, "z": 4.0}},
+        {"new_position": {"edge": "e", "offset": 1.0, "x": 2.0, "y": 3.0, "lon": 4.0}},
+    ],
+)
+def test_what_the_template_does_not_cover_goes_to_the_encoder(change: dict[str, Any]) -> None:
+    arguments = {**_arguments(np.random.default_rng(15)), **change}
+    assert target_result_json(**arguments) == dumps(target_result(**arguments))
