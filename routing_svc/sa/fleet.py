@@ -180,7 +180,7 @@ class Fleet(Generic[P]):
     _index: dict[str, int] = field(init=False, repr=False)
     _any_one: Requirement = field(init=False, repr=False)
     _probe_cache: _ProbeCache[P] | None = field(init=False, repr=False, default=None)
-    _compiled: tuple[object, SingleTargetServing[P] | None] | None = field(
+    _compiled: tuple[object, FleetConfig, SingleTargetServing[P] | None] | None = field(
         init=False, repr=False, default=None
     )
     _gammas: tuple[FleetState[P], FleetConfig, list[int], np.ndarray] | None = field(
@@ -308,18 +308,18 @@ class Fleet(Generic[P]):
         return Outcome(index, dispatch, gamma, amount, noise, old, new, tuple(backed_off))
 
     def _serving(self) -> SingleTargetServing[P] | None:
-        """The space's compiled update for this fleet (kept per space), or ``None``."""
+        """The space's compiled update for this fleet (kept per space and config), or ``None``."""
         space = self.space
         kept = self._compiled
-        if kept is not None and kept[0] is space:
-            return kept[1]
+        if kept is not None and kept[0] is space and kept[1] is self.config:
+            return kept[2]
         make = getattr(space, "serving", None)
         window = self.config.probe
         serving: SingleTargetServing[P] | None = None
         if callable(make) and (window is None or (math.isfinite(window) and window > 0.0)):
             probing = window is not None and _is_directed(type(space))
             serving = make(self._speeds, window if probing else 0.0)
-        self._compiled = (space, serving)
+        self._compiled = (space, self.config, serving)
         return serving
 
     def _observe_compiled(self, serving: SingleTargetServing[P], target: P) -> Outcome[P] | None:

@@ -156,8 +156,13 @@ def _other_update(
     rng: np.random.Generator,
     setup: Setup,
 ) -> None:
-    kind = rng.integers(3)
-    if kind == 0:  # a target with a requirement goes the methods' way in both
+    kind = rng.integers(4)
+    if kind == 3:  # a new config: another probe window (or none)
+        window = fleet.config.probe
+        changed = dataclasses.replace(fleet.config, probe=None if window else 10.0)
+        fleet.config = changed
+        reference.config = changed
+    elif kind == 0:  # a target with a requirement goes the methods' way in both
         target = _targets(case, rng, reference)
         try:
             expected = reference.observe(target, ["default"])
