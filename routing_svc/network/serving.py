@@ -38,7 +38,7 @@ from routing_svc.network.search import (
     nearest_vehicles,
 )
 from routing_svc.network.twins import set_twins
-from routing_svc.network.walking import _walk
+from routing_svc.network.walking import walk_spend
 from routing_svc.sa.space import Served
 from routing_svc.types import NetPosition
 
@@ -49,6 +49,18 @@ FloatArray = npt.NDArray[np.float64]
 
 _NO_EDGE = -1
 """Edge index of an unknown entry (``None``)."""
+
+Road = tuple[
+    Int32Array, ArcArray, Int32Array, Int32Array, FloatArray, FloatArray, FloatArray, IntArray
+]
+"""The graph and costs the kernels read: ``(arc_indptr, arcs, edge_class, fwd_indptr,
+length, cost, rate, rev)`` (:func:`~routing_svc.network.search.nearest_vehicles`'s
+class graph and arcs, the forward CSR's index, edge lengths, costs, cost per metre,
+reverse edges)."""
+
+Work = tuple[FloatArray, Int32Array, Int32Array, FloatArray, Int32Array, Int32Array, Int32Array]
+"""The search's work arrays ``(dist, pred, touched, heap_key, heap_node, head, next)``
+(:class:`~routing_svc.network.search.SearchBuffers`)."""
 
 
 @njit(cache=True)
@@ -90,19 +102,8 @@ def refresh_probes(
 
 @njit(cache=True)
 def _path_cost(
-    arc_indptr: Int32Array,
-    arcs: ArcArray,
-    edge_class: Int32Array,
-    length: FloatArray,
-    rate: FloatArray,
-    rev: IntArray,
-    dist: FloatArray,
-    pred: Int32Array,
-    touched: Int32Array,
-    heap_key: FloatArray,
-    heap_node: Int32Array,
-    head: Int32Array,
-    nxt: Int32Array,
+    road: Road,
+    work: Work,
     either_way: bool,
     from_edge: int,
     from_offset: float,
@@ -111,6 +112,8 @@ def _path_cost(
 ) -> float:
     """:meth:`RoadSpace.path_cost` (``inf`` when unreachable): the search with one
     vehicle (and its twin) of speed 1."""
+    arc_indptr, arcs, edge_class, _, length, _, rate, rev = road
+    dist, pred, touched, heap_key, heap_node, head, nxt = work
     m = 2 if either_way else 1
     edges = np.empty(m, dtype=np.int64)
     offsets = np.empty(m)
@@ -137,21 +140,8 @@ def _branches(fwd_indptr: Int32Array, rev: IntArray, either_way: bool, edge: int
 
 @njit(cache=True)
 def serve_one(
-    arc_indptr: Int32Array,
-    arcs: ArcArray,
-    edge_class: Int32Array,
-    fwd_indptr: Int32Array,
-    length: FloatArray,
-    cost: FloatArray,
-    rate: FloatArray,
-    rev: IntArray,
-    dist: FloatArray,
-    pred: Int32Array,
-    touched: Int32Array,
-    heap_key: FloatArray,
-    heap_node: Int32Array,
-    head: Int32Array,
-    nxt: Int32Array,
+    road: Road,
+    work: Work,
     target_edge: int,
     target_offset: float,
     veh_edge: IntArray,
@@ -188,6 +178,8 @@ def serve_one(
     in order, are ``backed[:n_backed]``) and whether the mover reached the
     target exactly. The mover's new position and entry are in the columns.
     """
+    arc_indptr, arcs, edge_class, _, length, cost, rate, rev = road
+    dist, pred, touched, heap_key, heap_node, head, nxt = work
     n = entry_edge.shape[0]
     found = nearest_vehicles(
         arc_indptr, arcs, edge_class, length, rate, target_edge, target_offset,
@@ -263,7 +255,7 @@ def serve_one(
             else:
                 new_e, new_s = target_edge, min(s + amount / t_rate, target_offset)
         else:
-            k, at = _walk(length, cost, rate, route, s, target_offset, amount)
+            k, at = walk_spend(length, cost, rate, route, s, target_offset, amount)
             if k < 0:
                 reached = True
             else:
@@ -272,9 +264,8 @@ def serve_one(
             new_e, new_s = target_edge, target_offset
         if probing:
             _move_entry(
-                arc_indptr, arcs, edge_class, fwd_indptr, length, cost, rate, rev,
-                dist, pred, touched, heap_key, heap_node, head, nxt, either_way,
-                start_e, start_s, new_e, new_s, route, entry_edge, entry_offset, mover, window,
+                road, work, either_way, start_e, start_s, new_e, new_s, route,
+                entry_edge, entry_offset, mover, window,
             )  # fmt: skip
         veh_edge[mover] = new_e
         veh_offset[mover] = new_s
@@ -291,21 +282,8 @@ def serve_one(
 
 @njit(cache=True)
 def _move_entry(
-    arc_indptr: Int32Array,
-    arcs: ArcArray,
-    edge_class: Int32Array,
-    fwd_indptr: Int32Array,
-    length: FloatArray,
-    cost: FloatArray,
-    rate: FloatArray,
-    rev: IntArray,
-    dist: FloatArray,
-    pred: Int32Array,
-    touched: Int32Array,
-    heap_key: FloatArray,
-    heap_node: Int32Array,
-    head: Int32Array,
-    nxt: Int32Array,
+    road: Road,
+    work: Work,
     either_way: bool,
     old_e: int,
     old_s: float,
@@ -318,6 +296,7 @@ def _move_entry(
     window: float,
 ) -> None:
     """Set vehicle ``i``'s entry after a move along ``route`` (:meth:`RoadSpace.entry`)."""
+    _, _, _, fwd_indptr, length, cost, rate, rev = road
     if new_e == old_e and new_s >= old_s:
         return
     k = 0
@@ -343,10 +322,8 @@ def _move_entry(
         behind += cost[edge]
     if entry_edge[i] >= 0:
         to_previous = _path_cost(
-            arc_indptr, arcs, edge_class, length, rate, rev,
-            dist, pred, touched, heap_key, heap_node, head, nxt, either_way,
-            entry_edge[i], entry_offset[i], new_e, new_s,
-        )  # fmt: skip
+            road, work, either_way, entry_edge[i], entry_offset[i], new_e, new_s
+        )
         if to_previous < np.inf and (to_previous <= window or best < 0):
             return
     entry_edge[i] = best
@@ -371,6 +348,9 @@ class FleetUpdate:
 
     Notes
     -----
+    The work arrays are the space's own, shared with its other searches (each
+    leaves them clean, and all of them hold the GIL, so they run one after
+    another); the vehicle links are taken once, long enough for this fleet.
     The lists given to :meth:`serve` are the fleet's own: they are updated in
     place, and compared by identity with what the columns were built from, so
     that a change made elsewhere (another kind of update, a restore) is picked
@@ -395,9 +375,16 @@ class FleetUpdate:
         self.window = window
         n = speeds.shape[0]
         self._n = n
-        self._buffers = buffers
-        self._arcs = arcs
         self._rev = rev
+        classes = network.end_classes
+        self._road: Road = (
+            classes.arc_indptr, arcs, classes.edge_class, network.fwd_indptr,
+            network.length, costs.cost, costs.rate, rev,
+        )  # fmt: skip
+        self._work: Work = (
+            buffers.dist, buffers.pred, buffers.touched, buffers.heap_key, buffers.heap_node,
+            buffers.head, buffers.vehicle_links(2 * n),
+        )  # fmt: skip
         self._speed = np.concatenate((speeds, speeds)) if either_way else speeds.copy()
         self._anyone = np.zeros(self._speed.shape[0], dtype=np.int64)
         self._one = np.ones(1, dtype=np.int64)
@@ -468,15 +455,10 @@ class FleetUpdate:
         own path then raises it).
         """
         self._sync(positions, entries)
-        net, costs, buffers = self.network, self.costs, self._buffers
-        classes = net.end_classes
         veh_edge, veh_offset = self._veh_edge, self._veh_offset
         entry_edge, entry_offset = self._entry_edge, self._entry_offset
         status, _, mover, completion, mover_cost, amount, n_backed, reached = serve_one(
-            classes.arc_indptr, self._arcs, classes.edge_class, net.fwd_indptr,
-            net.length, costs.cost, costs.rate, self._rev,
-            buffers.dist, buffers.pred, buffers.touched, buffers.heap_key, buffers.heap_node,
-            buffers.head, buffers.vehicle_links(veh_edge.shape[0]),
+            self._road, self._work,
             target.edge, target.offset, veh_edge, veh_offset, self._speed, self._anyone,
             self._one, self._probe_edge, self._probe_offset, self._each_own, self._ones,
             entry_edge, entry_offset, gammas, power, self.window, tolerance, self.either_way,

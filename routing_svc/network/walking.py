@@ -20,7 +20,7 @@ from routing_svc.network.compile import CompiledNetwork
 from routing_svc.network.costs import EdgeCosts
 from routing_svc.types import NetPosition
 
-__all__ = ["check_route", "random_walk", "walk_route"]
+__all__ = ["check_route", "random_walk", "walk_route", "walk_spend"]
 
 IntArray = npt.NDArray[np.int64]
 Int32Array = npt.NDArray[np.int32]
@@ -89,7 +89,7 @@ def _route_problem(fwd_indptr: Int32Array, fwd_indices: Int32Array, edges: IntAr
 
 
 @njit(cache=True)
-def _walk(
+def walk_spend(
     length: FloatArray,
     cost: FloatArray,
     rate: FloatArray,
@@ -169,7 +169,7 @@ def walk_route(
         if spend >= (target.offset - position.offset) * t_rate:
             return target
         return NetPosition(target.edge, float(min(position.offset + spend / t_rate, target.offset)))
-    k, offset = _walk(
+    k, offset = walk_spend(
         network.length, costs.cost, rate, route, float(position.offset), float(target.offset), spend
     )
     if k < 0:

@@ -7,7 +7,7 @@ compares byte for byte. A target's result is also the answer to the client.
 Encoding a target's result dict cost the service more than its search: the
 generic encoder walks the dict and formats every float, and several floats
 repeat (for the routing objective the cost is also the objective and the
-time). :func:`target_result_json` writes the same text from a fixed template.
+time). :meth:`TargetResult.to_json` writes the same text from a fixed template.
 Anything the template does not cover (a value that is not a plain finite
 float, int or string, a position described with other keys) goes to the
 canonical encoder, which also raises for NaN and infinity.
@@ -20,9 +20,9 @@ import json
 import math
 from collections.abc import Sequence
 from json.encoder import encode_basestring_ascii
-from typing import Any
+from typing import Any, NamedTuple
 
-__all__ = ["dumps", "target_result", "target_result_json"]
+__all__ = ["TargetResult", "dumps"]
 
 _CANONICAL = json.JSONEncoder(separators=(",", ":"), sort_keys=True, allow_nan=False)
 
@@ -81,119 +81,101 @@ def _position(described: dict[str, Any]) -> str:
     raise _Untemplated
 
 
-def target_result(
-    *,
-    seq: int,
-    target: dict[str, Any],
-    requires: list[str] | None,
-    served_by: Sequence[str],
-    times: Sequence[float],
-    moved: str,
-    cost: float,
-    objective: float,
-    step_size: float,
-    moved_by: float,
-    noise: float,
-    new_position: dict[str, Any],
-    backed_off: Sequence[tuple[str, dict[str, Any]]],
-) -> dict[str, Any]:
-    """The result of a target event as a dict (what :func:`target_result_json` writes)."""
-    return {
-        "seq": seq,
-        "version": seq,
-        "target": target,
-        "requires": requires,
-        "served_by": list(served_by),
-        "times": list(times),
-        "moved": moved,
-        "cost": cost,
-        "objective": objective,
-        "step_size": step_size,
-        "moved_by": moved_by,
-        "noise": noise,
-        "new_position": new_position,
-        "backed_off": [{"position": p, "vehicle": v} for v, p in backed_off],
-    }
+class TargetResult(NamedTuple):
+    """The result of a target event: what the client gets and the event log keeps.
 
-
-def target_result_json(
-    *,
-    seq: int,
-    target: dict[str, Any],
-    requires: list[str] | None,
-    served_by: Sequence[str],
-    times: Sequence[float],
-    moved: str,
-    cost: float,
-    objective: float,
-    step_size: float,
-    moved_by: float,
-    noise: float,
-    new_position: dict[str, Any],
-    backed_off: Sequence[tuple[str, dict[str, Any]]],
-) -> str:
-    """``dumps(target_result(...))``, written from a template.
-
-    Raises
-    ------
-    ValueError
-        For a NaN or infinite float (as the canonical encoder does).
+    ``target`` and ``new_position`` are described positions (``edge, offset, x, y``
+    and ``lon, lat`` where the network has a projection); ``new_position`` may be
+    the ``target`` object itself. ``backed_off`` lists ``(vehicle id, described
+    position)``.
     """
-    try:
+
+    seq: int
+    target: dict[str, Any]
+    requires: list[str] | None
+    served_by: Sequence[str]
+    times: Sequence[float]
+    moved: str
+    cost: float
+    objective: float
+    step_size: float
+    moved_by: float
+    noise: float
+    new_position: dict[str, Any]
+    backed_off: Sequence[tuple[str, dict[str, Any]]]
+
+    def as_dict(self) -> dict[str, Any]:
+        """The result as the API documents it (``version`` is ``seq``)."""
+        return {
+            "seq": self.seq,
+            "version": self.seq,
+            "target": self.target,
+            "requires": self.requires,
+            "served_by": list(self.served_by),
+            "times": list(self.times),
+            "moved": self.moved,
+            "cost": self.cost,
+            "objective": self.objective,
+            "step_size": self.step_size,
+            "moved_by": self.moved_by,
+            "noise": self.noise,
+            "new_position": self.new_position,
+            "backed_off": [{"position": p, "vehicle": v} for v, p in self.backed_off],
+        }
+
+    def to_json(self) -> str:
+        """``dumps(self.as_dict())``, written from a template.
+
+        Raises
+        ------
+        ValueError
+            For a NaN or infinite float (as the canonical encoder does).
+        """
+        try:
+            return self._templated()
+        except _Untemplated:
+            return dumps(self.as_dict())
+
+    def _templated(self) -> str:
+        cost = self.cost
         cost_text = _number(cost)
-        seq_text = _number(seq)
-        target_text = _position(target)
+        seq_text = _number(self.seq)
+        target_text = _position(self.target)
+        new_position = self.new_position
+        requires = self.requires
         return "".join(
             (
                 '{"backed_off":[',
                 ",".join(
-                    f'{{"position":{_position(p)},"vehicle":{_string(v)}}}' for v, p in backed_off
+                    f'{{"position":{_position(p)},"vehicle":{_string(v)}}}'
+                    for v, p in self.backed_off
                 ),
                 '],"cost":',
                 cost_text,
                 ',"moved":',
-                _string(moved),
+                _string(self.moved),
                 ',"moved_by":',
-                _number(moved_by),
+                _number(self.moved_by),
                 ',"new_position":',
-                target_text if new_position is target else _position(new_position),
+                target_text if new_position is self.target else _position(new_position),
                 ',"noise":',
-                _number(noise),
+                _number(self.noise),
                 ',"objective":',
-                cost_text if _same_float(objective, cost) else _number(objective),
+                cost_text if _same_float(self.objective, cost) else _number(self.objective),
                 ',"requires":',
                 "null" if requires is None else f"[{','.join(map(_string, requires))}]",
                 ',"seq":',
                 seq_text,
                 ',"served_by":[',
-                ",".join(map(_string, served_by)),
+                ",".join(map(_string, self.served_by)),
                 '],"step_size":',
-                _number(step_size),
+                _number(self.step_size),
                 ',"target":',
                 target_text,
                 ',"times":[',
-                ",".join(cost_text if _same_float(t, cost) else _number(t) for t in times),
+                ",".join(cost_text if _same_float(t, cost) else _number(t) for t in self.times),
                 '],"version":',
                 seq_text,
                 "}",
             )
         )
-    except _Untemplated:
-        pass
-    return dumps(
-        target_result(
-            seq=seq,
-            target=target,
-            requires=requires,
-            served_by=served_by,
-            times=times,
-            moved=moved,
-            cost=cost,
-            objective=objective,
-            step_size=step_size,
-            moved_by=moved_by,
-            noise=noise,
-            new_position=new_position,
-            backed_off=backed_off,
-        )
-    )

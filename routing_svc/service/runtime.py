@@ -26,7 +26,7 @@ from routing_svc.demand import DemandDistribution
 from routing_svc.errors import Conflict, InvalidInput, ReplayMismatch
 from routing_svc.network import RoadSpace
 from routing_svc.sa import Fleet, FleetConfig, Vehicle
-from routing_svc.service.canonical import dumps, target_result_json
+from routing_svc.service.canonical import TargetResult, dumps
 from routing_svc.service.networks import NetworkEntry
 from routing_svc.types import NetPosition
 
@@ -70,7 +70,7 @@ class FleetRuntime:
         d = outcome.dispatch
         described = self.entry.describe(target)
         required = list(requires) if requires else None
-        result = target_result_json(
+        result = TargetResult(
             seq=seq,
             target=described,
             requires=required,
@@ -90,7 +90,7 @@ class FleetRuntime:
             backed_off=[
                 (self.fleet.vehicles[j].id, self.entry.describe(p)) for j, p in outcome.backed_off
             ],
-        )
+        ).to_json()
         payload = {"target": self.base_space.encode(target), "requires": required}
         self.version = seq
         self.cost_sum += d.cost

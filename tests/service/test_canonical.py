@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from routing_svc.service.canonical import dumps, target_result, target_result_json
+from routing_svc.service.canonical import TargetResult, dumps
 
 _STRINGS = ["v01", "-157539101#0", 'quote"back\\slash', "Zürich/Straße", "tab\tnew\nline", "🚕"]
 
@@ -70,8 +70,8 @@ def test_template_writes_the_canonical_json() -> None:
     rng = np.random.default_rng(11)
     for _ in range(20_000):
         arguments = _arguments(rng)
-        text = target_result_json(**arguments)
-        assert text == dumps(target_result(**arguments))
+        text = TargetResult(**arguments).to_json()
+        assert text == dumps(TargetResult(**arguments).as_dict())
         assert json.loads(text)["cost"] == arguments["cost"]
 
 
@@ -79,7 +79,7 @@ def test_the_dict_is_the_result_the_api_documents() -> None:
     rng = np.random.default_rng(12)
     arguments = _arguments(rng)
     arguments["backed_off"] = [("v07", arguments["target"])]
-    result = json.loads(target_result_json(**arguments))
+    result = json.loads(TargetResult(**arguments).to_json())
     assert result["seq"] == result["version"] == arguments["seq"]
     assert result["backed_off"] == [{"vehicle": "v07", "position": arguments["target"]}]
     assert set(result) == {
@@ -92,9 +92,9 @@ def test_same_zero_is_not_taken_for_the_other() -> None:
     rng = np.random.default_rng(13)
     arguments = _arguments(rng)
     arguments.update(cost=0.0, objective=-0.0, times=[-0.0])
-    text = target_result_json(**arguments)
+    text = TargetResult(**arguments).to_json()
     assert '"cost":0.0' in text and '"objective":-0.0' in text and '"times":[-0.0]' in text
-    assert text == dumps(target_result(**arguments))
+    assert text == dumps(TargetResult(**arguments).as_dict())
 
 
 @pytest.mark.parametrize(
@@ -109,7 +109,7 @@ def test_same_zero_is_not_taken_for_the_other() -> None:
 def test_nan_and_infinity_raise_like_the_encoder(change: dict[str, Any]) -> None:
     arguments = {**_arguments(np.random.default_rng(14)), **change}
     with pytest.raises(ValueError, match="JSON compliant"):
-        target_result_json(**arguments)
+        TargetResult(**arguments).to_json()
 
 
 @pytest.mark.parametrize(
@@ -125,4 +125,4 @@ def test_nan_and_infinity_raise_like_the_encoder(change: dict[str, Any]) -> None
 )
 def test_what_the_template_does_not_cover_goes_to_the_encoder(change: dict[str, Any]) -> None:
     arguments = {**_arguments(np.random.default_rng(15)), **change}
-    assert target_result_json(**arguments) == dumps(target_result(**arguments))
+    assert TargetResult(**arguments).to_json() == dumps(TargetResult(**arguments).as_dict())
