@@ -442,6 +442,10 @@ def nearest_vehicles(
     nxt: Int32Array,
     n_vehicles: int,
     cutoff: float,
+    probe_edge: npt.NDArray[np.int64] | None = None,
+    probe_offset: FloatArray | None = None,
+    probe_speed: FloatArray | None = None,
+    probe_time: FloatArray | None = None,
 ) -> tuple[int, int, int, npt.NDArray[np.int64], FloatArray, FloatArray, Int32Array]:
     """Find the ``counts[g]`` fastest vehicles of every group ``g`` for one target.
 
@@ -468,6 +472,14 @@ def nearest_vehicles(
     arrive before it: the best lists then hold what was found (``inf`` and
     ``-1`` in slots left empty, a found vehicle may also arrive later than
     the cutoff), the status is ``STATUS_OK`` and there is no mover or route.
+
+    With ``probe_*`` columns (laid out like the vehicles', ``probe_time`` one
+    entry per vehicle, speeds no faster than the fastest vehicle's, and one
+    group that needs one vehicle), the search also prices those other positions from the
+    labels it computed (:func:`_price_probes`): ``probe_time[j]`` is then the
+    time of position ``j`` (its better entry) wherever that is less than the
+    last served vehicle's arrival, what a second search with that cutoff
+    would find.
     """
     n_groups = counts.shape[0]
     n_veh = veh_edge.shape[0]
@@ -606,6 +618,16 @@ def nearest_vehicles(
             pred, edge_class, veh_edge[mover], target_edge, veh_offset[mover] <= target_offset
         )
 
+    if (
+        probe_edge is not None
+        and probe_offset is not None
+        and probe_speed is not None
+        and probe_time is not None
+    ):
+        _price_probes(
+            edge_class, length, rate, dist, target_edge, target_offset,
+            probe_edge, probe_offset, probe_speed, probe_time,
+        )  # fmt: skip
     for j in range(n_touched):
         dist[touched[j]] = np.inf
         pred[touched[j]] = -1
@@ -613,6 +635,53 @@ def nearest_vehicles(
         if veh_edge[i] >= 0:
             head[edge_class[veh_edge[i]]] = -1
     return status, detail, mover_slot, route, best_time, best_cost, best_idx
+
+
+@njit(cache=True)
+def _price_probes(
+    edge_class: Int32Array,
+    length: FloatArray,
+    rate: FloatArray,
+    dist: FloatArray,
+    target_edge: int,
+    target_offset: float,
+    probe_edge: npt.NDArray[np.int64],
+    probe_offset: FloatArray,
+    probe_speed: FloatArray,
+    probe_time: FloatArray,
+) -> None:
+    """Each position's time to the target from the labels ``dist`` a search left (``inf``
+    where its class has none); ``probe_time[j]`` gets the better of entries ``j``,
+    ``j + n``, ... .
+
+    A label is exact where the search settled its class, and an upper bound
+    where it only reached it; the search settled every class whose label is
+    below ``T * vmax``, ``T`` the last served vehicle's arrival and ``vmax``
+    the fastest speed, so every time below ``T`` is exact, and a position
+    whose time is at least ``T`` is not needed. The prices are the search's
+    own: ``(s_t - s) * rate[t]`` ahead on the target edge, else the label plus
+    the rest of the edge.
+    """
+    n = probe_time.shape[0]
+    t_rate = rate[target_edge]
+    for j in range(n):
+        probe_time[j] = np.inf
+    for i in range(probe_edge.shape[0]):
+        e = probe_edge[i]
+        if e < 0:
+            continue
+        s = probe_offset[i]
+        if e == target_edge and s <= target_offset:
+            c = (target_offset - s) * t_rate
+        else:
+            label = dist[edge_class[e]]
+            if label == np.inf:
+                continue
+            c = label + (length[e] - s) * rate[e]
+        time = c / probe_speed[i]
+        j = i % n
+        if time < probe_time[j]:
+            probe_time[j] = time
 
 
 @njit(cache=True)

@@ -33,7 +33,6 @@ from routing_svc.network.search import (
     ArcArray,
     Int32Array,
     SearchBuffers,
-    arrivals_before,
     fleet_columns,
     nearest_vehicles,
 )
@@ -151,8 +150,6 @@ def serve_one(
     one: IntArray,
     probe_edge: IntArray,
     probe_offset: FloatArray,
-    each_own: IntArray,
-    ones: IntArray,
     entry_edge: IntArray,
     entry_offset: FloatArray,
     gammas: FloatArray,
@@ -181,11 +178,21 @@ def serve_one(
     arc_indptr, arcs, edge_class, _, length, cost, rate, rev = road
     dist, pred, touched, heap_key, heap_node, head, nxt = work
     n = entry_edge.shape[0]
-    found = nearest_vehicles(
-        arc_indptr, arcs, edge_class, length, rate, target_edge, target_offset,
-        veh_edge, veh_offset, speed, anyone, one,
-        dist, pred, touched, heap_key, heap_node, head, nxt, n, np.inf,
-    )  # fmt: skip
+    probing = window > 0.0
+    times = np.empty(n)  # the probes' times, priced by the fleet's own search
+    if probing:
+        found = nearest_vehicles(
+            arc_indptr, arcs, edge_class, length, rate, target_edge, target_offset,
+            veh_edge, veh_offset, speed, anyone, one,
+            dist, pred, touched, heap_key, heap_node, head, nxt, n, np.inf,
+            probe_edge, probe_offset, speed, times,
+        )  # fmt: skip
+    else:
+        found = nearest_vehicles(
+            arc_indptr, arcs, edge_class, length, rate, target_edge, target_offset,
+            veh_edge, veh_offset, speed, anyone, one,
+            dist, pred, touched, heap_key, heap_node, head, nxt, n, np.inf,
+        )  # fmt: skip
     status, detail, mover_slot, route = found[0], found[1], found[2], found[3]
     if status != STATUS_OK:
         return status, detail, -1, np.nan, np.nan, 0.0, 0, False
@@ -199,19 +206,14 @@ def serve_one(
     else:
         amount = gamma * (mover_cost / mover_speed) ** (power - 1.0) / mover_speed
     amount = min(mover_cost, amount)
-    probing = window > 0.0
     rows = np.empty(1, dtype=np.int64)
 
     n_backed = 0
-    if probing:  # Fleet._probe
-        near = nearest_vehicles(
-            arc_indptr, arcs, edge_class, length, rate, target_edge, target_offset,
-            probe_edge, probe_offset, speed, each_own, ones,
-            dist, pred, touched, heap_key, heap_node, head, nxt, n, completion,
-        )  # fmt: skip
-        times = arrivals_before(n, near[4], near[6], completion)
+    if probing:  # Fleet._probe; only probes that arrive before the fleet count
         bar = tolerance * completion
         for j in range(n):
+            if not times[j] < completion:
+                continue
             gain = completion - times[j]
             if gain <= bar:
                 continue
@@ -388,9 +390,6 @@ class FleetUpdate:
         self._speed = np.concatenate((speeds, speeds)) if either_way else speeds.copy()
         self._anyone = np.zeros(self._speed.shape[0], dtype=np.int64)
         self._one = np.ones(1, dtype=np.int64)
-        own = np.arange(n, dtype=np.int64)
-        self._each_own = np.concatenate((own, own)) if either_way else own
-        self._ones = np.ones(n, dtype=np.int64)
         self._backed = np.empty(n, dtype=np.int64)
         width = self._speed.shape[0]
         self._veh_edge = np.zeros(width, dtype=np.int64)
@@ -460,7 +459,7 @@ class FleetUpdate:
         status, _, mover, completion, mover_cost, amount, n_backed, reached = serve_one(
             self._road, self._work,
             target.edge, target.offset, veh_edge, veh_offset, self._speed, self._anyone,
-            self._one, self._probe_edge, self._probe_offset, self._each_own, self._ones,
+            self._one, self._probe_edge, self._probe_offset,
             entry_edge, entry_offset, gammas, power, self.window, tolerance, self.either_way,
             self._backed,
         )  # fmt: skip

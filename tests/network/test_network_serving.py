@@ -71,10 +71,14 @@ SETUPS = [
 
 
 def _targets(case: NetCase, rng: np.random.Generator, fleet: Fleet[NetPosition]) -> NetPosition:
-    """A random target: anywhere, at an end of an edge, or on a vehicle's reference."""
-    kind = rng.integers(6)
+    """A random target: anywhere, at an end of an edge, on a vehicle's reference, or just
+    behind one on its edge (where its back probe may reach it first)."""
+    kind = rng.integers(7)
     if kind == 0:
         return fleet.state.positions[int(rng.integers(len(fleet.vehicles)))]
+    if kind == 6:
+        edge, offset = fleet.state.positions[int(rng.integers(len(fleet.vehicles)))]
+        return NetPosition(edge, float(offset * rng.uniform(0.97, 1.0)))
     (target,) = case.random_positions(rng, 1)
     if kind == 1:
         return NetPosition(target.edge, 0.0)
