@@ -17,7 +17,7 @@ fleet keeps vehicles sorted by id, so ties break by vehicle id.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Generic, Protocol, TypeVar, runtime_checkable
+from typing import Generic, NamedTuple, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
@@ -158,9 +158,9 @@ class DirectedSpace(Protocol[P]):
         ...
 
 
-@dataclass(frozen=True, slots=True)
-class Served(Generic[P]):
-    """What a :class:`SingleTargetServing` did for one target (already applied).
+class Served(NamedTuple, Generic[P]):
+    """What a :class:`SingleTargetServing` did for one target (already applied; a named
+    tuple, built once per target).
 
     Attributes
     ----------

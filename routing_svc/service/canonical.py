@@ -52,11 +52,19 @@ def _number(value: object) -> str:
     raise _Untemplated
 
 
-def _same_float(a: object, b: float) -> bool:
-    """Whether ``a`` is written exactly as the float ``b`` (equal, and the same zero)."""
-    return (
-        type(a) is float and a == b and (b != 0.0 or math.copysign(1.0, a) == math.copysign(1.0, b))
-    )
+def _same_as(value: object, written: float, text: str) -> str:
+    """``_number(value)``, taken from ``text`` (the float ``written``, written already)
+    when ``value`` is written the same: the same object, or an equal float with the same
+    sign of zero."""
+    if value is written:
+        return text
+    if (
+        type(value) is float
+        and value == written
+        and (written != 0.0 or math.copysign(1.0, value) == math.copysign(1.0, written))
+    ):
+        return text
+    return _number(value)
 
 
 def _string(value: object) -> str:
@@ -147,8 +155,10 @@ class TargetResult(NamedTuple):
             (
                 '{"backed_off":[',
                 ",".join(
-                    f'{{"position":{_position(p)},"vehicle":{_string(v)}}}'
-                    for v, p in self.backed_off
+                    [
+                        f'{{"position":{_position(p)},"vehicle":{_string(v)}}}'
+                        for v, p in self.backed_off
+                    ]
                 ),
                 '],"cost":',
                 cost_text,
@@ -161,7 +171,7 @@ class TargetResult(NamedTuple):
                 ',"noise":',
                 _number(self.noise),
                 ',"objective":',
-                cost_text if _same_float(self.objective, cost) else _number(self.objective),
+                _same_as(self.objective, cost, cost_text),
                 ',"requires":',
                 "null" if requires is None else f"[{','.join(map(_string, requires))}]",
                 ',"seq":',
@@ -173,7 +183,7 @@ class TargetResult(NamedTuple):
                 ',"target":',
                 target_text,
                 ',"times":[',
-                ",".join(cost_text if _same_float(t, cost) else _number(t) for t in self.times),
+                ",".join([_same_as(t, cost, cost_text) for t in self.times]),
                 '],"version":',
                 seq_text,
                 "}",
