@@ -7,10 +7,14 @@ back-offs, the mover's step along its route (:meth:`RoadSpace.advance`) and
 its new entry (:meth:`RoadSpace.entry`). Each is a small amount of arithmetic,
 and the Python glue between them cost several times the searches. Here they
 are one numba function, :func:`serve_one`, over columns of the fleet that are
-kept between targets (:class:`FleetUpdate`).
+kept between targets (:class:`FleetUpdate`), with one search: the fleet's
+search also prices the probes from the labels it computed (a probe matters
+only if it arrives before the fleet, and the fleet's search has settled every
+class such a probe can be on; see :func:`~routing_svc.network.search.nearest_vehicles`).
 
 It does exactly the arithmetic of those methods, in the same order (every
-comparison, every sum), so a fleet gives bit-identical positions either way;
+comparison, every sum), so a fleet gives bit-identical positions either way
+(the gradient step of eqs. (9)-(10) and the probe's back-offs);
 ``tests/network/test_network_serving.py`` checks that against the methods
 themselves over thousands of targets. Whatever it does not cover (a
 requirement of several types, annealing noise, a search that reports an
