@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
+from collections.abc import Sequence
 from itertools import compress, count
 from operator import is_not
 
@@ -34,7 +35,7 @@ from routing_svc.types import NetPosition
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
 
-__all__ = ["SearchColumns"]
+__all__ = ["SearchColumns", "changed_rows", "write_rows"]
 
 
 class _Entry:
@@ -53,6 +54,40 @@ class _Entry:
         self.items = items
         self.edges = edges
         self.offsets = offsets
+
+
+def changed_rows(current: Sequence[object], seen: Sequence[object]) -> list[int]:
+    """The indices where ``current`` holds another object than ``seen`` (by identity, in C)."""
+    return list(compress(count(), map(is_not, current, seen)))
+
+
+def write_rows(
+    network: CompiledNetwork,
+    either_way: bool,
+    positions: Sequence[NetPosition],
+    rows: list[int],
+    edges: IntArray,
+    offsets: FloatArray,
+) -> None:
+    """Write ``positions[i]`` for ``i`` in ``rows`` into search columns (``2 n`` long with
+    twins, as :func:`~routing_svc.network.twins.with_twins` lays them out), and their twins.
+
+    Each position is converted as :func:`~routing_svc.network.search.fleet_columns`
+    converts it; a bad one raises :class:`InvalidInput` before anything is written.
+    """
+    fresh: list[tuple[int, int, float]] = []
+    for i in rows:
+        e, s = positions[i]
+        if type(e) is not int or type(s) is not float:
+            column_edges, column_offsets = fleet_columns([positions[i]])  # or InvalidInput
+            e, s = int(column_edges[0]), float(column_offsets[0])
+        fresh.append((i, e, s))
+    for i, e, s in fresh:
+        edges[i] = e
+        offsets[i] = s
+    if either_way:
+        indices = np.array(rows, dtype=np.int64)
+        set_twins(reverse_edges(network), network.length, edges, offsets, indices)
 
 
 class SearchColumns:
@@ -106,9 +141,13 @@ class SearchColumns:
                 while len(self._entries) > self._capacity:
                     self._entries.popitem(last=False)
             return entry.edges, entry.offsets
-        changed = list(compress(count(), map(is_not, positions, entry.items)))
+        changed = changed_rows(positions, entry.items)
         if changed:
-            self._rewrite(entry, positions, changed)
+            write_rows(
+                self._network, self._either_way, positions, changed, entry.edges, entry.offsets
+            )
+            for i in changed:
+                entry.items[i] = positions[i]
         return entry.edges, entry.offsets
 
     def _build(self, positions: list[NetPosition]) -> _Entry:
@@ -121,23 +160,3 @@ class SearchColumns:
             net = self._network
             edges, offsets = with_twins(reverse_edges(net), net.length, edges, offsets)
         return edges, offsets
-
-    def _rewrite(self, entry: _Entry, positions: list[NetPosition], changed: list[int]) -> None:
-        """Recompute the entries ``changed`` (and their twins) from ``positions``; a bad
-        position raises before anything is written."""
-        fresh: list[tuple[int, int, float]] = []
-        for i in changed:
-            e, s = positions[i]
-            if type(e) is not int or type(s) is not float:
-                column_edges, column_offsets = fleet_columns([positions[i]])  # or InvalidInput
-                e, s = int(column_edges[0]), float(column_offsets[0])
-            fresh.append((i, e, s))
-        edges, offsets = entry.edges, entry.offsets
-        for i, e, s in fresh:
-            edges[i] = e
-            offsets[i] = s
-            entry.items[i] = positions[i]
-        if self._either_way:
-            net = self._network
-            rows = np.array(changed, dtype=np.int64)
-            set_twins(reverse_edges(net), net.length, edges, offsets, rows)

@@ -23,13 +23,11 @@ error) is left to them.
 
 from __future__ import annotations
 
-from itertools import compress, count
-from operator import is_not
-
 import numpy as np
 import numpy.typing as npt
 from numba import njit
 
+from routing_svc.network.columns import changed_rows, write_rows
 from routing_svc.network.compile import CompiledNetwork
 from routing_svc.network.costs import EdgeCosts, check_position
 from routing_svc.network.search import (
@@ -37,7 +35,6 @@ from routing_svc.network.search import (
     ArcArray,
     Int32Array,
     SearchBuffers,
-    fleet_columns,
     nearest_vehicles,
 )
 from routing_svc.network.twins import set_twins
@@ -415,32 +412,29 @@ class FleetUpdate:
             self._seen_entries = [_UNSEEN] * self._n
         if positions == self._seen and entries == self._seen_entries:
             return  # equal lists (compared by identity first) need no rewrite
-        changed = set(compress(count(), map(is_not, positions, self._seen)))
-        changed.update(compress(count(), map(is_not, entries, self._seen_entries)))
+        changed = set(changed_rows(positions, self._seen))
+        changed.update(changed_rows(entries, self._seen_entries))
         if not changed:
             return
-        rows = np.fromiter(sorted(changed), dtype=np.int64, count=len(changed))
-        for i in rows.tolist():  # before anything is written
+        rows = sorted(changed)
+        for i in rows:  # before anything is written
             check_position(self.network, positions[i], what=f"vehicle {i}")
-            if entries[i] is not None:
-                check_position(self.network, entries[i], what=f"entry of vehicle {i}")
-        edges, offsets = fleet_columns([positions[i] for i in rows.tolist()])
-        self._veh_edge[rows] = edges
-        self._veh_offset[rows] = offsets
-        for i in rows.tolist():
+            entry = entries[i]
+            if entry is not None:
+                check_position(self.network, entry, what=f"entry of vehicle {i}")
+        write_rows(self.network, self.either_way, positions, rows, self._veh_edge, self._veh_offset)
+        for i in rows:
             entry = entries[i]
             self._entry_edge[i] = _NO_EDGE if entry is None else entry.edge
             self._entry_offset[i] = 0.0 if entry is None else entry.offset
             self._seen[i] = positions[i]
             self._seen_entries[i] = entry
-        rate, length = self.costs.rate, self.network.length
-        if self.either_way:
-            set_twins(self._rev, length, self._veh_edge, self._veh_offset, rows)
         if self.window > 0.0:
             refresh_probes(
-                rate, self._rev, length, self.window, self._veh_edge, self._veh_offset,
-                self._entry_edge, self._entry_offset, self._probe_edge, self._probe_offset,
-                self.either_way, rows,
+                self.costs.rate, self._rev, self.network.length, self.window,
+                self._veh_edge, self._veh_offset, self._entry_edge, self._entry_offset,
+                self._probe_edge, self._probe_offset, self.either_way,
+                np.array(rows, dtype=np.int64),
             )  # fmt: skip
 
     def serve(

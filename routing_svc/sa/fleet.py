@@ -345,14 +345,10 @@ class Fleet(Generic[P]):
         index = state.targets
         state.updates[mover] += 1
         state.targets = index + 1
-        gamma = float(gammas[mover])
-        if self._gammas is not None and self._gammas[3] is gammas:  # the mover's next step
-            gammas[mover] = self.step_size(mover)
-            self._gammas[2][mover] = state.updates[mover]
         return Outcome(
             index,
             dispatch,
-            gamma,
+            float(gammas[mover]),
             done.amount,
             0.0,
             done.old_position,
@@ -371,8 +367,6 @@ class Fleet(Generic[P]):
             self._gammas = (state, self.config, list(state.updates), gammas)
             return gammas
         _, _, counts, gammas = kept
-        if counts == state.updates:
-            return gammas
         for i in compress(count(), map(ne, state.updates, counts)):
             gammas[i] = self.step_size(i)
             counts[i] = state.updates[i]
