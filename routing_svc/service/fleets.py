@@ -12,7 +12,11 @@ the group and stages its transaction itself, without waiting for any lock,
 and only the commit (the ``fsync``) runs on a worker thread, while the loop
 goes on serving requests. The targets' Python work thus stays on one thread
 instead of passing the interpreter lock back and forth with a writer thread
-for every target. When that is not possible at once (another thread or
+for every target. The loop hands the interpreter lock to the committer for
+the few microseconds it needs to start the commit (:data:`COMMIT_HANDOFF_WAIT`):
+CPython would otherwise let it run only when the loop next idles, after the
+loop parsed the next requests, so the disk's wait would follow that work
+instead of overlapping it. When that is not possible at once (another thread or
 process holds the write lock, a fleet's lock is taken, a fleet is not in
 memory), the group goes to a worker thread as a whole. Every other request
 (from worker threads, and all of them on PostgreSQL, whose statements wait
@@ -74,6 +78,24 @@ COMMITS = Counter(
     "routing_svc_commits_total",
     "Transactions of write requests committed, by the writer that staged them",
     ["writer"],
+)
+
+COMMIT_HANDOFF_WAIT = 0.002
+"""How long (seconds) the event loop waits at most for the committer thread to start a commit.
+
+The committer needs the interpreter lock for some Python before SQLite's
+commit releases it to wait for the disk. A thread that wants the lock gets it
+only after the switch interval (5 ms) or when the holder blocks, and under load
+the event loop blocks only when it runs out of requests to parse. So the loop
+itself blocks until the committer signals that it started (the lock goes to
+it at once), and only then goes on: the ``fsync`` then overlaps the loop's
+work instead of waiting for the loop to idle. The wait is bounded, so a
+committer that is slow to be scheduled costs the loop at most this long.
+"""
+
+COMMIT_HANDOFF_TIMEOUTS = Counter(
+    "routing_svc_commit_handoff_timeouts_total",
+    "Commits whose thread had not started within COMMIT_HANDOFF_WAIT (the loop went on)",
 )
 
 Compute = Callable[[FleetRuntime], list[NewEvent]]
@@ -441,11 +463,7 @@ class FleetService:
                     jobs = [_FleetJob(self, fid, by_fleet[fid]) for fid in sorted(by_fleet)]
                     opened = self.log.try_append_groups_uncommitted([job.request() for job in jobs])
                     if opened is not None:
-                        if self._committer is None:
-                            self._committer = ThreadPoolExecutor(
-                                max_workers=1, thread_name_prefix="routing-svc-commit"
-                            )
-                        await loop.run_in_executor(self._committer, opened.commit)
+                        await self._commit_beside_loop(loop, opened.commit)
                         committed = True
                 except BaseException as exc:
                     # computed (perhaps in part) but not durable: rebuild from the log
@@ -468,6 +486,26 @@ class FleetService:
             rest = [p for p in batch if not p.settled]
             if rest:
                 await loop.run_in_executor(None, self._commit, rest)
+
+    async def _commit_beside_loop(
+        self, loop: asyncio.AbstractEventLoop, commit: Callable[[], None]
+    ) -> None:
+        """Run ``commit`` on the committer thread, handing it the interpreter lock first
+        (see :data:`COMMIT_HANDOFF_WAIT`), and wait for it without blocking the loop."""
+        if self._committer is None:
+            self._committer = ThreadPoolExecutor(
+                max_workers=1, thread_name_prefix="routing-svc-commit"
+            )
+        started = threading.Event()
+
+        def start_and_commit() -> None:
+            started.set()
+            commit()
+
+        done = loop.run_in_executor(self._committer, start_and_commit)
+        if not started.wait(COMMIT_HANDOFF_WAIT):  # releases the interpreter lock
+            COMMIT_HANDOFF_TIMEOUTS.inc()
+        await done
 
     def _write_loop(self) -> None:
         while True:

@@ -6,12 +6,13 @@ from __future__ import annotations
 
 import asyncio
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 import pytest
+from prometheus_client import REGISTRY
 
 from routing_svc.service.fleets import Answer, Outcome
 from routing_svc.service.inprocess import InProcessFleetClient
@@ -37,6 +38,13 @@ def on_loop(future: Outcome) -> asyncio.Future[Answer]:
     """The future of a request queued from a loop: one of that loop's."""
     assert isinstance(future, asyncio.Future)
     return future
+
+
+def handoff_timeouts() -> float:
+    """Commits whose thread had not started within the loop's bounded hand-over."""
+    value = REGISTRY.get_sample_value("routing_svc_commit_handoff_timeouts_total")
+    assert value is not None
+    return value
 
 
 def run(coroutine: Any) -> Any:
@@ -110,3 +118,52 @@ def test_a_waiter_that_went_away_still_gets_its_target_written_once(
     events = service.log.events("a")
     assert [e.seq for e in events] == [1, 2, 3, 4]
     assert [e.kind for e in events[1:]] == ["target"] * 3
+
+
+def test_the_commit_runs_on_the_committer_thread_and_the_loop_serves_while_it_waits(
+    client: InProcessFleetClient,
+) -> None:
+    """The loop hands the commit to the committer thread; if that thread cannot start it
+    (here: busy until the test lets it go), the loop waits only for the bounded hand-over,
+    goes on running its other callbacks, and the target is answered once it is durable."""
+    service = client.service
+    committer_threads: list[str] = []
+    hand_over = service._commit_beside_loop
+
+    async def watched(loop: asyncio.AbstractEventLoop, commit: Callable[[], None]) -> None:
+        def commit_and_record() -> None:
+            committer_threads.append(threading.current_thread().name)
+            commit()
+
+        await hand_over(loop, commit_and_record)
+
+    async def post() -> tuple[int, int, bool, bool]:
+        loop = asyncio.get_running_loop()
+        # a first target starts the committer thread; it commits there
+        (_, first) = await on_loop(service.submit_targets("a", specs(5, 1), loop=loop))
+        timeouts_before = handoff_timeouts()
+        assert service._committer is not None
+        release = threading.Event()
+        busy = service._committer.submit(release.wait)  # the committer cannot start
+        future = on_loop(service.submit_targets("a", specs(6, 1), loop=loop))
+        ran_meanwhile = asyncio.Event()
+        loop.call_soon(ran_meanwhile.set)
+        await ran_meanwhile.wait()  # the loop is not stuck behind the commit ...
+        await asyncio.sleep(0.05)
+        pending_while_busy = not future.done()  # ... which cannot be durable yet
+        release.set()
+        (_, second) = await future
+        busy.result()
+        await service.drain()
+        timed_out = handoff_timeouts() - timeouts_before == 1
+        return first, second, pending_while_busy, timed_out
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(service, "_commit_beside_loop", watched)
+        first, second, pending_while_busy, timed_out = run(post())
+    assert (first, second) == (2, 3)
+    assert pending_while_busy and timed_out
+    assert committer_threads == ["routing-svc-commit_0"] * 2
+    events = service.log.events("a")
+    assert [e.seq for e in events] == [1, 2, 3]
+    assert client.get_fleet("a")["version"] == 3
