@@ -496,14 +496,16 @@ class FleetService:
             self._committer = ThreadPoolExecutor(
                 max_workers=1, thread_name_prefix="routing-svc-commit"
             )
-        started = threading.Event()
+        not_started = threading.Lock()  # released by the committer as it starts
+        not_started.acquire()
 
         def start_and_commit() -> None:
-            started.set()
+            not_started.release()
             commit()
 
         done = loop.run_in_executor(self._committer, start_and_commit)
-        if not started.wait(COMMIT_HANDOFF_WAIT):  # releases the interpreter lock
+        # blocks, so the interpreter lock goes to the committer
+        if not not_started.acquire(timeout=COMMIT_HANDOFF_WAIT):
             COMMIT_HANDOFF_TIMEOUTS.inc()
         await done
 
