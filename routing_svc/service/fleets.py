@@ -490,8 +490,9 @@ class FleetService:
     async def _commit_beside_loop(
         self, loop: asyncio.AbstractEventLoop, commit: Callable[[], None]
     ) -> None:
-        """Run ``commit`` on the committer thread, handing it the interpreter lock first
-        (see :data:`COMMIT_HANDOFF_WAIT`), and wait for it without blocking the loop."""
+        """Run ``commit`` on the committer thread: block (at most
+        :data:`COMMIT_HANDOFF_WAIT`) until the thread has started it, which hands it the
+        interpreter lock, then await its end without blocking the loop."""
         if self._committer is None:
             self._committer = ThreadPoolExecutor(
                 max_workers=1, thread_name_prefix="routing-svc-commit"
