@@ -13,14 +13,15 @@ and only the commit (the ``fsync``) runs on a worker thread, while the loop
 goes on serving requests. The targets' Python work thus stays on one thread
 instead of passing the interpreter lock back and forth with a writer thread
 for every target. The loop hands the interpreter lock to the committer for
-the few microseconds it needs to start the commit (:data:`COMMIT_HANDOFF_WAIT`):
-CPython would otherwise let it run only when the loop next idles, after the
-loop parsed the next requests, so the disk's wait would follow that work
-instead of overlapping it. When that is not possible at once (another thread or
-process holds the write lock, a fleet's lock is taken, a fleet is not in
-memory), the group goes to a worker thread as a whole. Every other request
-(from worker threads, and all of them on PostgreSQL, whose statements wait
-on the network) joins the queue of the writer thread.
+the few microseconds it needs to start the commit
+(:mod:`~routing_svc.service.committer`): CPython would otherwise let it run
+only when the loop next idles, after the loop parsed the next requests, so the
+disk's wait would follow that work instead of overlapping it. When staging is
+not possible at once (another thread or process holds the write lock, a
+fleet's lock is taken, a fleet is not in memory), the group goes to a worker
+thread as a whole. Every other request (from worker threads, and all of them
+on PostgreSQL, whose statements wait on the network) joins the queue of the
+writer thread.
 
 Under each fleet's lock the cached :class:`FleetRuntime` first replays the
 events other workers (or hosts) wrote since it last looked, then computes
@@ -41,7 +42,7 @@ import json
 import threading
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
@@ -56,6 +57,7 @@ from routing_svc.errors import (
     UnknownNetwork,
 )
 from routing_svc.service.canonical import dumps
+from routing_svc.service.committer import Committer
 from routing_svc.service.creation import build_created_payload
 from routing_svc.service.networks import NetworkEntry, NetworkRegistry
 from routing_svc.service.runtime import FleetRuntime
@@ -78,24 +80,6 @@ COMMITS = Counter(
     "routing_svc_commits_total",
     "Transactions of write requests committed, by the writer that staged them",
     ["writer"],
-)
-
-COMMIT_HANDOFF_WAIT = 0.002
-"""How long (seconds) the event loop waits at most for the committer thread to start a commit.
-
-The committer needs the interpreter lock for some Python before SQLite's
-commit releases it to wait for the disk. A thread that wants the lock gets it
-only after the switch interval (5 ms) or when the holder blocks, and under load
-the event loop blocks only when it runs out of requests to parse. So the loop
-itself blocks until the committer signals that it started (the lock goes to
-it at once), and only then goes on: the ``fsync`` then overlaps the loop's
-work instead of waiting for the loop to idle. The wait is bounded, so a
-committer that is slow to be scheduled costs the loop at most this long.
-"""
-
-COMMIT_HANDOFF_TIMEOUTS = Counter(
-    "routing_svc_commit_handoff_timeouts_total",
-    "Commits whose thread had not started within COMMIT_HANDOFF_WAIT (the loop went on)",
 )
 
 Compute = Callable[[FleetRuntime], list[NewEvent]]
@@ -269,7 +253,7 @@ class FleetService:
         # the event loop's writer (see the module's docstring)
         self._loop_queue: deque[_Pending] = deque()
         self._loop_drain: asyncio.Task[None] | None = None
-        self._committer: ThreadPoolExecutor | None = None
+        self._committer: Committer | None = None
 
     # -- plumbing ---------------------------------------------------------------
 
@@ -410,7 +394,7 @@ class FleetService:
         while self._loop_queue:
             self._loop_queue.popleft().fail(StorageError("the fleet service is shut down"))
         if self._committer is not None:
-            self._committer.shutdown(wait=True)
+            self._committer.close()
 
     async def drain(self) -> None:
         """Wait until the event loop's writer has committed everything queued to it (its
@@ -490,25 +474,13 @@ class FleetService:
     async def _commit_beside_loop(
         self, loop: asyncio.AbstractEventLoop, commit: Callable[[], None]
     ) -> None:
-        """Run ``commit`` on the committer thread: block (at most
-        :data:`COMMIT_HANDOFF_WAIT`) until the thread has started it, which hands it the
-        interpreter lock, then await its end without blocking the loop."""
+        """Run ``commit`` on the committer thread (:meth:`Committer.hand_over`: the loop
+        blocks until the thread has started it, at most
+        :data:`~routing_svc.service.committer.COMMIT_HANDOFF_WAIT`), then await its end
+        without blocking the loop."""
         if self._committer is None:
-            self._committer = ThreadPoolExecutor(
-                max_workers=1, thread_name_prefix="routing-svc-commit"
-            )
-        not_started = threading.Lock()  # released by the committer as it starts
-        not_started.acquire()
-
-        def start_and_commit() -> None:
-            not_started.release()
-            commit()
-
-        done = loop.run_in_executor(self._committer, start_and_commit)
-        # blocks, so the interpreter lock goes to the committer
-        if not not_started.acquire(timeout=COMMIT_HANDOFF_WAIT):
-            COMMIT_HANDOFF_TIMEOUTS.inc()
-        await done
+            self._committer = Committer("routing-svc-commit")
+        await self._committer.hand_over(loop, commit)
 
     def _write_loop(self) -> None:
         while True:

@@ -30,6 +30,15 @@ def client() -> Iterator[InProcessFleetClient]:
         yield opened
 
 
+def blocked_until(release: threading.Event) -> Callable[[], None]:
+    """A commit that waits until ``release`` is set."""
+
+    def commit() -> None:
+        release.wait()
+
+    return commit
+
+
 def specs(seed: int, n: int) -> list[TargetSpec]:
     return [TargetSpec.model_validate(t) for t in targets(seed, n)]
 
@@ -144,7 +153,8 @@ def test_the_commit_runs_on_the_committer_thread_and_the_loop_serves_while_it_wa
         timeouts_before = handoff_timeouts()
         assert service._committer is not None
         release = threading.Event()
-        busy = service._committer.submit(release.wait)  # the committer cannot start
+        # the committer is busy, so it cannot start the next commit
+        busy = service._committer.hand_over(loop, blocked_until(release))
         future = on_loop(service.submit_targets("a", specs(6, 1), loop=loop))
         ran_meanwhile = asyncio.Event()
         loop.call_soon(ran_meanwhile.set)
@@ -153,7 +163,7 @@ def test_the_commit_runs_on_the_committer_thread_and_the_loop_serves_while_it_wa
         pending_while_busy = not future.done()  # ... which cannot be durable yet
         release.set()
         (_, second) = await future
-        busy.result()
+        await busy
         await service.drain()
         timed_out = handoff_timeouts() - timeouts_before == 1
         return first, second, pending_while_busy, timed_out
@@ -163,7 +173,7 @@ def test_the_commit_runs_on_the_committer_thread_and_the_loop_serves_while_it_wa
         first, second, pending_while_busy, timed_out = run(post())
     assert (first, second) == (2, 3)
     assert pending_while_busy and timed_out
-    assert committer_threads == ["routing-svc-commit_0"] * 2
+    assert committer_threads == ["routing-svc-commit"] * 2
     events = service.log.events("a")
     assert [e.seq for e in events] == [1, 2, 3]
     assert client.get_fleet("a")["version"] == 3
