@@ -118,9 +118,19 @@ def _install_sqlite_hooks(engine: Engine, *, busy_timeout_ms: int) -> None:
     @event.listens_for(engine, "begin")
     def _on_begin(connection: Connection) -> None:
         mode = connection.get_execution_options().get(BEGIN_MODE, "IMMEDIATE")
-        if mode not in ("IMMEDIATE", "DEFERRED", "EXCLUSIVE"):
+        statement = _SQLITE_BEGIN.get(mode)
+        if statement is None:
             raise StorageError(f"unknown SQLite BEGIN mode {mode!r}")
-        connection.exec_driver_sql(f"BEGIN {mode}")
+        # straight to the driver: a statement through ``connection`` would cost every
+        # transaction SQLAlchemy's execution machinery (its errors are handled alike,
+        # see storage_errors)
+        driver = connection.connection.dbapi_connection
+        assert driver is not None
+        driver.execute(statement)
+
+
+_SQLITE_BEGIN = {mode: f"BEGIN {mode}" for mode in ("IMMEDIATE", "DEFERRED", "EXCLUSIVE")}
+"""The statement that begins a transaction in each BEGIN mode."""
 
 
 def _switch_to_wal(cursor: Any, *, busy_timeout_ms: int) -> str:

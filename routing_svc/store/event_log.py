@@ -23,6 +23,7 @@ import threading
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
+from datetime import datetime
 from types import TracebackType
 from typing import Any, Self
 
@@ -574,7 +575,8 @@ def _check_groups(groups: Sequence[FleetGroup]) -> str:
 def _write_groups(conn: Connection, groups: Sequence[FleetGroup]) -> list[list[GroupItem]]:
     """Stage and write ``groups`` in the open write transaction ``conn``; their items."""
     versions = q.lock_fleets(conn, [group.fleet_id for group in groups])
-    staged = [_stage_in(conn, group, versions[group.fleet_id]) for group in groups]
+    created_at = q.now()  # one moment for the whole transaction
+    staged = [_stage_in(conn, group, versions[group.fleet_id], created_at) for group in groups]
     q.insert_event_rows(conn, [row for stage in staged for row in stage.rows])
     q.move_versions(conn, [stage.move for stage in staged if stage.move is not None])
     return [stage.items for stage in staged]
@@ -661,9 +663,10 @@ class _Staged:
     items: list[GroupItem]
 
 
-def _stage_in(conn: Connection, group: FleetGroup, version: int) -> _Staged:
+def _stage_in(conn: Connection, group: FleetGroup, version: int, created_at: datetime) -> _Staged:
     """Build one fleet's group inside the open transaction ``conn``, whose row is
-    locked at ``version``; the caller writes the rows and the version."""
+    locked at ``version``, with events stamped ``created_at``; the caller writes the
+    rows and the version."""
     fleet_id, expected_version = group.fleet_id, group.expected_version
     requests, build, snapshot = group.requests, group.build, group.snapshot
     if expected_version > version:
@@ -696,7 +699,6 @@ def _stage_in(conn: Connection, group: FleetGroup, version: int) -> _Staged:
     built: list[list[NewEvent] | RoutingSvcError] = []
     if fresh:
         built = _checked_group(build(list(missed), list(fresh)), len(fresh))
-    now = q.now()
     rows: list[dict[str, Any]] = []
     outcome: dict[int, tuple[tuple[EventRecord, ...], RoutingSvcError | None]] = {}
     for index, entry in zip(fresh, built, strict=True):
@@ -710,7 +712,7 @@ def _stage_in(conn: Connection, group: FleetGroup, version: int) -> _Staged:
             entry,
             idempotency_key=key,
             request_hash=digest,
-            created_at=now,
+            created_at=created_at,
         )
         rows += mine
         outcome[index] = (q.records_of_rows(mine), None)
