@@ -599,8 +599,23 @@ class UncommittedAppend:
         self.items = items
 
     def commit(self) -> None:
-        """Commit (one ``fsync``); on failure nothing is written and the error is raised."""
-        self._end(self._conn.commit, f"commit ({self._what})")
+        """Commit (one ``fsync``); on failure nothing is written and the error is raised.
+
+        The ``COMMIT`` goes straight to the driver: the calling thread then releases the
+        interpreter lock once, at SQLite's commit, after a few microseconds of Python
+        (SQLAlchemy's commit runs more, and the driver's ``commit()`` releases the lock
+        twice: a thread that must get it back mid-way can wait for a busy event loop,
+        see :mod:`routing_svc.service.committer`). SQLAlchemy's commit then only ends its
+        own transaction: the driver has nothing left to commit.
+        """
+        self._end(self._commit_on_driver, f"commit ({self._what})")
+
+    def _commit_on_driver(self) -> None:
+        conn = self._conn
+        driver = conn.connection.dbapi_connection
+        assert driver is not None
+        driver.execute("COMMIT")
+        conn.commit()
 
     def rollback(self) -> None:
         """Write nothing."""

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from routing_svc.errors import UnknownFleet
+from routing_svc.errors import RoutingSvcError, UnknownFleet
 from routing_svc.store import EventLog, FleetGroup
 from tests.store.test_append_group import one_each
 
@@ -123,3 +123,26 @@ def test_postgresql_always_answers_none(pg_database: str, pg_schema: str) -> Non
         log.create_fleet("a", "n", "{}", "{}")
         assert log.try_append_groups_uncommitted(groups("a")) is None
         assert [e.seq for e in log.events("a")] == [1]
+
+
+def test_a_failing_commit_writes_nothing_and_frees_the_lock(sqlite_log: EventLog) -> None:
+    """SQLite refuses the ``COMMIT`` (a deferred foreign key the transaction broke): the
+    error is raised, nothing of the transaction is stored, and the next append works."""
+    opened = sqlite_log.try_append_groups_uncommitted(groups("a"))
+    assert opened is not None
+    driver = opened._conn.connection.dbapi_connection
+    assert driver is not None
+    driver.execute("PRAGMA defer_foreign_keys = ON")
+    driver.execute(
+        "INSERT INTO events (fleet_id, seq, kind, payload, batch_size, created_at) "
+        "VALUES ('nobody', 1, 'target', '{}', 1, '2026-01-01 00:00:00')"
+    )
+    with pytest.raises(RoutingSvcError, match="FOREIGN KEY"):
+        opened.commit()
+    assert stored_seqs(sqlite_log, "a") == [1]
+    assert sqlite_log.get_fleet("a").version == 1
+    again = sqlite_log.try_append_groups_uncommitted(groups("a"))
+    assert again is not None
+    again.commit()
+    assert stored_seqs(sqlite_log, "a") == [1, 2]
+    assert sqlite_log.integrity_check() == []
