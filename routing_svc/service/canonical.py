@@ -7,7 +7,8 @@ compares byte for byte. A target's result is also the answer to the client.
 Encoding a target's result dict cost the service more than its search: the
 generic encoder walks the dict and formats every float, and several floats
 repeat (for the routing objective the cost is also the objective and the
-time). :meth:`TargetResult.to_json` writes the same text from a fixed template.
+time). :meth:`TargetResult.to_json` writes the same text from a fixed template,
+and :func:`target_payload` the event's payload.
 Anything the template does not cover (a value that is not a plain finite
 float, int or string, a position described with other keys) goes to the
 canonical encoder, which also raises for NaN and infinity.
@@ -22,7 +23,7 @@ from collections.abc import Sequence
 from json.encoder import encode_basestring_ascii
 from typing import Any, NamedTuple
 
-__all__ = ["TargetResult", "dumps"]
+__all__ = ["TargetResult", "dumps", "target_payload"]
 
 _CANONICAL = json.JSONEncoder(separators=(",", ":"), sort_keys=True, allow_nan=False)
 
@@ -71,6 +72,28 @@ def _string(value: object) -> str:
     if type(value) is not str:
         raise _Untemplated
     return _text(value)
+
+
+def _requires(requires: list[str] | None) -> str:
+    return "null" if requires is None else f"[{','.join(map(_string, requires))}]"
+
+
+def target_payload(target: dict[str, Any], requires: list[str] | None) -> str:
+    """A target event's payload, ``dumps({"target": target, "requires": requires})``,
+    written from a template.
+
+    ``target`` is an encoded position (``{"edge", "offset"}``); anything else goes to
+    the canonical encoder, which also raises for a NaN or infinite offset.
+    """
+    try:
+        if len(target) == 2:
+            return (
+                f'{{"requires":{_requires(requires)},"target":{{"edge":'
+                f'{_string(target["edge"])},"offset":{_number(target["offset"])}}}}}'
+            )
+    except (_Untemplated, KeyError):
+        pass
+    return dumps({"target": target, "requires": requires})
 
 
 def _position(described: dict[str, Any]) -> str:
@@ -173,7 +196,7 @@ class TargetResult(NamedTuple):
                 ',"objective":',
                 _same_as(self.objective, cost, cost_text),
                 ',"requires":',
-                "null" if requires is None else f"[{','.join(map(_string, requires))}]",
+                _requires(requires),
                 ',"seq":',
                 seq_text,
                 ',"served_by":[',

@@ -26,7 +26,7 @@ from routing_svc.demand import DemandDistribution
 from routing_svc.errors import Conflict, InvalidInput, ReplayMismatch
 from routing_svc.network import RoadSpace
 from routing_svc.sa import Fleet, FleetConfig, Vehicle
-from routing_svc.service.canonical import TargetResult, dumps
+from routing_svc.service.canonical import TargetResult, dumps, target_payload
 from routing_svc.service.networks import NetworkEntry
 from routing_svc.types import NetPosition
 
@@ -91,11 +91,11 @@ class FleetRuntime:
                 (self.fleet.vehicles[j].id, self.entry.describe(p)) for j, p in outcome.backed_off
             ],
         ).to_json()
-        payload = {"target": self.base_space.encode(target), "requires": required}
+        payload = target_payload(self.base_space.encode(target), required)
         self.version = seq
         self.cost_sum += d.cost
         self.recent.append(d.cost)
-        return dumps(payload), result
+        return payload, result
 
     def apply_travel_times(self, times: dict[str, float]) -> tuple[str, str]:
         """Replace per-edge travel times (only for ``cost = time``)."""

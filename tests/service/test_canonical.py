@@ -1,4 +1,5 @@
-"""A target's result written from the template is exactly the canonical JSON of its dict."""
+"""A target's result and payload written from their templates are exactly the canonical JSON
+of their dicts."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from routing_svc.service.canonical import TargetResult, dumps
+from routing_svc.service.canonical import TargetResult, dumps, target_payload
 
 _STRINGS = ["v01", "-157539101#0", 'quote"back\\slash', "Zürich/Straße", "tab\tnew\nline", "🚕"]
 
@@ -126,3 +127,37 @@ def test_nan_and_infinity_raise_like_the_encoder(change: dict[str, Any]) -> None
 def test_what_the_template_does_not_cover_goes_to_the_encoder(change: dict[str, Any]) -> None:
     arguments = {**_arguments(np.random.default_rng(15)), **change}
     assert TargetResult(**arguments).to_json() == dumps(TargetResult(**arguments).as_dict())
+
+
+def test_the_payload_template_writes_the_canonical_json() -> None:
+    rng = np.random.default_rng(16)
+    for _ in range(20_000):
+        target = {"edge": str(rng.choice(_STRINGS)), "offset": _float(rng)}
+        requires = (
+            None
+            if rng.random() < 0.5
+            else [str(rng.choice(_STRINGS)) for _ in range(int(rng.integers(0, 3)))]
+        )
+        text = target_payload(target, requires)
+        assert text == dumps({"target": target, "requires": requires})
+        assert json.loads(text) == {"target": target, "requires": requires}
+
+
+@pytest.mark.parametrize(
+    "target",
+    [
+        {"edge": "e", "offset": 2},  # an int offset
+        {"edge": "e", "offset": np.float64(0.5)},  # a float subclass
+        {"edge": "e", "x": 1.0},  # other keys
+        {"edge": "e", "offset": 1.0, "lane": 0},
+        {"edge": 7, "offset": 1.0},  # not a string
+    ],
+)
+def test_a_payload_the_template_does_not_cover_goes_to_the_encoder(target: dict[str, Any]) -> None:
+    assert target_payload(target, ["A"]) == dumps({"target": target, "requires": ["A"]})
+
+
+@pytest.mark.parametrize("offset", [math.nan, math.inf, -math.inf])
+def test_a_payload_with_nan_or_infinity_raises_like_the_encoder(offset: float) -> None:
+    with pytest.raises(ValueError, match="JSON compliant"):
+        target_payload({"edge": "e", "offset": offset}, None)
