@@ -7,6 +7,7 @@ caller's transaction and never commits.
 from __future__ import annotations
 
 import functools
+import operator
 from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
 from typing import Any
@@ -150,6 +151,8 @@ _SQLITE_EVENT_COLUMNS = (
     "fleet_id", "seq", "kind", "payload", "result", "idempotency_key", "request_hash",
     "batch_size", "created_at",
 )  # fmt: skip
+_sqlite_event_values = operator.itemgetter(*_SQLITE_EVENT_COLUMNS[:-1])
+"""A row's values in the order of :data:`_SQLITE_INSERT_EVENTS`, but its ``created_at``."""
 _SQLITE_INSERT_EVENTS = (
     f"INSERT INTO events ({', '.join(_SQLITE_EVENT_COLUMNS)}) "
     f"VALUES ({', '.join('?' for _ in _SQLITE_EVENT_COLUMNS)})"
@@ -184,13 +187,10 @@ def insert_event_rows(conn: Connection, rows: list[dict[str, Any]]) -> None:
         conn.execute(_INSERT_EVENTS, rows)
         return
     stamp = _created_at_processor(conn.dialect)
-    stamps = {moment: stamp(moment) for moment in {row["created_at"] for row in rows}}
+    stamps = {moment: (stamp(moment),) for moment in {row["created_at"] for row in rows}}
     driver.executemany(
         _SQLITE_INSERT_EVENTS,
-        [
-            (*(row[c] for c in _SQLITE_EVENT_COLUMNS[:-1]), stamps[row["created_at"]])
-            for row in rows
-        ],
+        [_sqlite_event_values(row) + stamps[row["created_at"]] for row in rows],
     )
 
 

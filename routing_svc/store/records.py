@@ -29,6 +29,8 @@ def as_utc(moment: datetime) -> datetime:
 
     SQLite keeps no time zone, so a stored UTC timestamp reads back naive.
     """
+    if moment.tzinfo is UTC:
+        return moment
     if moment.tzinfo is None:
         return moment.replace(tzinfo=UTC)
     return moment.astimezone(UTC)
