@@ -5,13 +5,19 @@ from __future__ import annotations
 from pathlib import Path
 
 from fastapi.testclient import TestClient
+from prometheus_client import REGISTRY
 
 from routing_svc.service.app import create_app
-from tests.reliability.workload import fleet_body
+from tests.reliability.workload import fleet_body, target_stream
 from tests.service.conftest import make_settings
 from tests.service.test_bad_input import every_route
 
 ALLOWED = "https://dispatch.example"
+
+
+def fast_answers() -> float:
+    value = REGISTRY.get_sample_value("routing_svc_target_fast_path_total")
+    return 0.0 if value is None else value
 
 
 def test_every_write_route_needs_the_key(sqlite_url: str, tmp_path: Path) -> None:
@@ -42,3 +48,32 @@ def test_cors_allows_only_configured_origins(sqlite_url: str, tmp_path: Path) ->
         assert r.status_code == 200 and r.headers["access-control-allow-origin"] == ALLOWED
         r = c.options("/v1/fleets", headers={"Origin": "https://evil.example", **pre})
         assert "access-control-allow-origin" not in r.headers
+
+
+def test_the_hot_route_keeps_the_key_and_cors_once(sqlite_url: str, tmp_path: Path) -> None:
+    """``POST .../targets`` takes a short way in (the fast path): it still needs the key,
+    gets CORS headers once, and what the fast path passes on (a bad body) is answered by
+    the route with the same headers, once."""
+    app = create_app(make_settings(sqlite_url, tmp_path, api_key="k3y", cors_origins=[ALLOWED]))
+    key = {"X-API-Key": "k3y"}
+    target = target_stream(5, 1)[0]
+    with TestClient(app) as c:
+        assert c.post("/v1/fleets", json=fleet_body(), headers=key).status_code == 201
+        url = "/v1/fleets/f1/targets"
+        before = fast_answers()
+        r = c.post(url, json=target, headers={"Origin": ALLOWED, **key})
+        assert r.status_code == 200 and fast_answers() == before + 1
+        assert r.headers.get_list("access-control-allow-origin") == [ALLOWED]
+        assert r.headers.get_list("vary") == ["Origin"]
+        r = c.post(url, json=target, headers={"Origin": "https://evil.example", **key})
+        assert r.status_code == 200 and "access-control-allow-origin" not in r.headers
+        r = c.post(url, json=target, headers={"Origin": ALLOWED})
+        assert r.status_code == 401
+        assert r.headers["content-type"].startswith("application/problem+json")
+        r = c.post(url, content=b"{", headers={"Origin": ALLOWED, **key})
+        assert r.status_code == 422
+        assert r.headers["content-type"].startswith("application/problem+json")
+        assert r.headers.get_list("access-control-allow-origin") == [ALLOWED]
+        assert r.headers.get_list("vary") == ["Origin"]
+        assert fast_answers() == before + 2
+        assert c.get("/v1/fleets/f1", headers=key).json()["version"] == 3
