@@ -3,9 +3,11 @@
 A target costs the service some tens of microseconds of search and update,
 while FastAPI's request machinery (routing, dependency resolution, exception
 middleware, response classes) costs several times that. This middleware sits
-directly inside :class:`~routing_svc.service.guards.Guards` (so the API key and
-the body limit apply unchanged) and answers the common case itself: a valid
-body for a fleet that is in memory. It parses the body with the same pydantic
+directly inside the application's own middleware, the
+:class:`~routing_svc.service.guards.Guards` first (so the API key and the body
+limit apply unchanged), and :class:`~routing_svc.service.app.ServiceApp` sends
+the route to it past FastAPI's outer wrappers. It answers the common case
+itself: a valid body for a fleet that is in memory. It parses the body with the same pydantic
 model, queues it exactly like the FastAPI route
 (:func:`~routing_svc.service.routes.targets.submit_target`) and answers with the
 same bytes.
