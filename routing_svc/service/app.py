@@ -158,7 +158,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         dashboard.router,
     ):
         app.include_router(router)
-    app.target_fast_path = settings.target_fast_path  # (the guards come first)
+    app.target_fast_path = settings.target_fast_path  # inside the guards and CORS added below
     app.add_middleware(
         Guards,
         max_body_bytes=settings.max_body_bytes,

@@ -7,10 +7,10 @@ directly inside the application's own middleware, the
 :class:`~routing_svc.service.guards.Guards` first (so the API key and the body
 limit apply unchanged), and :class:`~routing_svc.service.app.ServiceApp` sends
 the route to it past FastAPI's outer wrappers. It answers the common case
-itself: a valid body for a fleet that is in memory. It parses the body with the same pydantic
-model, queues it exactly like the FastAPI route
-(:func:`~routing_svc.service.routes.targets.submit_target`) and answers with the
-same bytes.
+itself: a valid body for a fleet that is in memory. It parses the body with the
+same pydantic model, queues it exactly like the FastAPI route
+(:func:`~routing_svc.service.routes.targets.submit_target`) and answers with
+the same bytes.
 
 Everything else goes on to the FastAPI route, with the body replayed: an
 invalid body or header, a fleet that must first be read from the database,
