@@ -6,21 +6,12 @@ from __future__ import annotations
 import asyncio
 import threading
 from collections.abc import Callable, Iterator
-from typing import Any
 
 import pytest
 from prometheus_client import REGISTRY
 
 from routing_svc.service.committer import COMMIT_HANDOFF_WAIT, Committer
-
-
-def blocked_until(release: threading.Event) -> Callable[[], None]:
-    """A commit that waits until ``release`` is set."""
-
-    def commit() -> None:
-        release.wait()
-
-    return commit
+from tests.service.test_loop_futures import blocked_until, run  # run: a fresh loop, own thread
 
 
 def handoff_timeouts() -> float:
@@ -34,17 +25,6 @@ def committer() -> Iterator[Committer]:
     opened = Committer("test-commit")
     yield opened
     opened.close()
-
-
-def run(coroutine: Any) -> Any:
-    loop = asyncio.new_event_loop()
-    seen: list[dict[str, Any]] = []
-    loop.set_exception_handler(lambda _, context: seen.append(context))
-    try:
-        return loop.run_until_complete(coroutine)
-    finally:
-        loop.close()
-        assert seen == []
 
 
 def test_commits_run_in_order_on_the_thread_and_answer_on_the_loop(
