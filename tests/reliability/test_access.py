@@ -5,19 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 
 from fastapi.testclient import TestClient
-from prometheus_client import REGISTRY
 
 from routing_svc.service.app import create_app
 from tests.reliability.workload import fleet_body, target_stream
 from tests.service.conftest import make_settings
 from tests.service.test_bad_input import every_route
+from tests.service.test_fast_path import fast_answers
 
 ALLOWED = "https://dispatch.example"
-
-
-def fast_answers() -> float:
-    value = REGISTRY.get_sample_value("routing_svc_target_fast_path_total")
-    return 0.0 if value is None else value
 
 
 def test_every_write_route_needs_the_key(sqlite_url: str, tmp_path: Path) -> None:

@@ -8,16 +8,13 @@ import threading
 from collections.abc import Callable, Iterator
 
 import pytest
-from prometheus_client import REGISTRY
 
 from routing_svc.service.committer import COMMIT_HANDOFF_WAIT, Committer
-from tests.service.test_loop_futures import blocked_until, run  # run: a fresh loop, own thread
-
-
-def handoff_timeouts() -> float:
-    value = REGISTRY.get_sample_value("routing_svc_commit_handoff_timeouts_total")
-    assert value is not None
-    return value
+from tests.service.test_loop_futures import (  # run: a fresh loop on a thread of its own
+    blocked_until,
+    handoff_timeouts,
+    run,
+)
 
 
 @pytest.fixture

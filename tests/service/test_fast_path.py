@@ -64,7 +64,7 @@ def _answers(client: TestClient, requests: list[Request]) -> list[tuple[int, str
     return answers
 
 
-def _fast_answers() -> float:
+def fast_answers() -> float:
     value = REGISTRY.get_sample_value("routing_svc_target_fast_path_total")
     return 0.0 if value is None else value
 
@@ -73,13 +73,13 @@ def test_fast_path_answers_like_the_route(
     make_client: Callable[..., TestClient], tmp_path: Path
 ) -> None:
     requests = _requests()
-    before = _fast_answers()
+    before = fast_answers()
     fast = _answers(make_client(f"sqlite:///{tmp_path / 'fast.db'}"), requests)
-    served_fast = _fast_answers() - before
+    served_fast = fast_answers() - before
     route = _answers(
         make_client(f"sqlite:///{tmp_path / 'route.db'}", target_fast_path=False), requests
     )
-    assert _fast_answers() - before == served_fast  # the route app never used it
+    assert fast_answers() - before == served_fast  # the route app never used it
     for i, (a, b) in enumerate(zip(fast, route, strict=True)):
         assert a == b, (i, requests[i], a, b)
     statuses = [status for status, _, _ in fast]
