@@ -1,7 +1,10 @@
-"""Networks for the road-network tests: a real OSM district and generated nets.
+"""Networks for the road-network tests: two real OSM districts and generated nets.
 
 - ``drt``: ``<SUMO_HOME>/tools/game/DRT/osm.net.xml`` from the eclipse-sumo
   package (Berlin, converted from OpenStreetMap, with a UTM projection);
+- ``bs3d``: ``<SUMO_HOME>/tools/game/bs3d/bs.net.xml``, a part of Braunschweig
+  converted from OpenStreetMap that eclipse-sumo ships (42 of its 174 passenger edges
+  are one-way);
 - ``oneway``: generated here with ``netgenerate --rand`` where only 60 % of
   the roads are two-way and no U-turns exist, so many targets can only be
   reached by driving around a block, and many edges fall outside the largest
@@ -29,6 +32,7 @@ from tests.network.reference import NxReference
 
 SUMO_HOME = Path(sumo.SUMO_HOME)
 DRT_NET = SUMO_HOME / "tools" / "game" / "DRT" / "osm.net.xml"
+BS3D_NET = SUMO_HOME / "tools" / "game" / "bs3d" / "bs.net.xml"
 ONEWAY_ARGS = (
     "--rand",
     "--rand.iterations=400",
@@ -130,6 +134,12 @@ def drt_case(network_cache: Path) -> NetCase:
 
 
 @pytest.fixture(scope="session")
+def bs3d_case(network_cache: Path) -> NetCase:
+    network = load_network(BS3D_NET, cache_dir=network_cache)
+    return NetCase("bs3d", BS3D_NET, network, NxReference(BS3D_NET))
+
+
+@pytest.fixture(scope="session")
 def oneway_case(network_cache: Path, oneway_path: Path) -> NetCase:
     network = load_network(oneway_path, cache_dir=network_cache)
     return NetCase("oneway", oneway_path, network, NxReference(oneway_path))
@@ -149,7 +159,7 @@ def restricted_case(network_cache: Path, tmp_path_factory: pytest.TempPathFactor
     )
 
 
-@pytest.fixture(scope="session", params=["drt", "oneway"])
+@pytest.fixture(scope="session", params=["drt", "bs3d", "oneway"])
 def case(request: pytest.FixtureRequest) -> NetCase:
     """Each test network in turn."""
     result: NetCase = request.getfixturevalue(f"{request.param}_case")
