@@ -5,7 +5,7 @@
     expected_cost(model, positions, speeds, demand, power=q)  evaluate.py
     gap(value, optimum)                                       evaluate.py
     solve_pmedian(costs, weights, p, method="auto")           pmedian.py
-        greedy + fast interchange                             interchange.py
+        greedy, fast interchange, neighbourhood search        interchange.py
         Lagrangian bound and site reduction                   lagrangian.py
     candidate_sites(network, demand, max_sites=...)           candidates.py
     routing-svc optimum                                       command.py

@@ -13,11 +13,13 @@ transformed matrix).
 Two methods:
 
 - ``"heuristic"``: greedy addition and Whitaker's fast interchange to a local
-  optimum (:mod:`routing_svc.optimum.interchange`).
-- ``"milp"``: exact. The heuristic gives an incumbent; a Lagrangian bound
-  (:mod:`routing_svc.optimum.lagrangian`) often proves it optimal at once, and
-  otherwise drops the sites that cannot be in a better solution. What remains
-  is solved with HiGHS (``scipy.optimize.milp``) in the assignment formulation::
+  optimum, then a variable neighbourhood search from it
+  (:mod:`routing_svc.optimum.interchange`).
+- ``"milp"``: exact. Greedy addition and the fast interchange give an
+  incumbent; a Lagrangian bound (:mod:`routing_svc.optimum.lagrangian`) often
+  proves it optimal at once, and otherwise drops the sites that cannot be in
+  a better solution. What remains is solved with HiGHS
+  (``scipy.optimize.milp``) in the assignment formulation::
 
       min  sum_ij w_j c_ij x_ij
       s.t. sum_i x_ij = 1            for every atom j
@@ -51,7 +53,7 @@ from scipy.optimize import Bounds, LinearConstraint, milp
 
 from routing_svc.demand import FloatArray
 from routing_svc.errors import InvalidInput
-from routing_svc.optimum.interchange import greedy_interchange
+from routing_svc.optimum.interchange import greedy_interchange, neighbourhood_search
 from routing_svc.optimum.lagrangian import lagrangian_bound
 
 IntArray = npt.NDArray[np.int64]
@@ -149,6 +151,8 @@ def solve_pmedian(
     if exact:
         deadline = time.perf_counter() + time_limit
         sites, lower = _solve_exact(c, w, int(p), incumbent=sites, deadline=deadline, reduce=reduce)
+    else:
+        sites = neighbourhood_search(c, w, sites)
     value = objective(costs, weights, sites)
     proven = lower is not None and value - lower <= PROVEN_GAP * value
     return PMedianSolution(

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from routing_svc.errors import InvalidInput
-from routing_svc.optimum.interchange import greedy_interchange
+from routing_svc.optimum.interchange import greedy_interchange, neighbourhood_search
 from routing_svc.optimum.lagrangian import lagrangian_bound
 from routing_svc.optimum.pmedian import objective, solve_pmedian
 from tests.optimum.conftest import FloatArray, all_subset_values, brute_force_pmedian
@@ -83,6 +83,37 @@ def test_heuristic_is_close_to_milp_and_never_better(kind: str, seed: int) -> No
     assert heuristic.lower_bound is None
     assert heuristic.objective >= exact.objective * (1 - 1e-9)
     assert heuristic.objective <= exact.objective * 1.03
+
+
+@pytest.mark.parametrize("kind", sorted(STRUCTURED))
+def test_neighbourhood_search_leaves_the_local_optima_of_the_interchange(kind: str) -> None:
+    """Where greedy + fast interchange stop above the optimum, the search reaches it."""
+    stuck = 0
+    for seed in range(60):
+        costs, weights = STRUCTURED[kind](np.random.default_rng(400 + seed), 18, 30)
+        best = brute_force_pmedian(costs, weights, 4)
+        local = greedy_interchange(costs, weights, 4)
+        if objective(costs, weights, local) <= best * (1 + 1e-9):
+            continue
+        stuck += 1
+        searched = neighbourhood_search(costs, weights, local)
+        assert len(set(searched.tolist())) == 4
+        assert objective(costs, weights, searched) == pytest.approx(best, rel=1e-9)
+        heuristic = solve_pmedian(costs, weights, 4, method="heuristic")
+        assert heuristic.objective == pytest.approx(best, rel=1e-9)
+    assert stuck >= 3  # the instances do exercise the search
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_neighbourhood_search_never_loses_and_repeats_itself(seed: int) -> None:
+    costs, weights = asymmetric_instance(np.random.default_rng(500 + seed), 40, 60)
+    start = greedy_interchange(costs, weights, 5)
+    first = neighbourhood_search(costs, weights, start, seed=seed)
+    again = neighbourhood_search(costs, weights, start, seed=seed)
+    assert first.tolist() == again.tolist()
+    assert objective(costs, weights, first) <= objective(costs, weights, start)
+    every_site = np.arange(7, dtype=np.int64)
+    assert neighbourhood_search(costs[:7], weights, every_site).tolist() == every_site.tolist()
 
 
 @pytest.mark.parametrize("seed", range(4))
