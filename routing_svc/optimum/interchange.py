@@ -1,4 +1,4 @@
-"""The p-median heuristic: greedy addition, then Whitaker's fast interchange.
+"""The p-median heuristic: greedy addition, Whitaker's fast interchange, neighbourhood search.
 
 Greedy addition opens, ``p`` times, the site that lowers
 ``F(S) = sum_j w_j min_{i in S} c_ij`` most. The fast interchange of Whitaker
