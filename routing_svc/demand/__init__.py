@@ -13,7 +13,7 @@ noise.
     uniform_rectangle / gaussian_mixture (plane)      plane.py
 """
 
-from routing_svc.demand.distribution import DemandDistribution, FloatArray
+from routing_svc.demand.distribution import DemandDistribution
 from routing_svc.demand.network import (
     DEFAULT_SPACING,
     edge_pieces,
@@ -27,7 +27,6 @@ from routing_svc.demand.plane import gaussian_mixture, mixture_density, uniform_
 __all__ = [
     "DEFAULT_SPACING",
     "DemandDistribution",
-    "FloatArray",
     "edge_pieces",
     "from_weights_file",
     "gaussian_mixture",

@@ -23,12 +23,9 @@ from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
 import numpy as np
-import numpy.typing as npt
 
 from routing_svc.errors import InvalidInput
-from routing_svc.types import NetPosition, PlanePosition
-
-FloatArray = npt.NDArray[np.float64]
+from routing_svc.types import FloatArray, NetPosition, PlanePosition
 
 P = TypeVar("P", NetPosition, PlanePosition)
 

@@ -20,17 +20,14 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-import numpy.typing as npt
 
-from routing_svc.demand.distribution import DemandDistribution, FloatArray
+from routing_svc.demand.distribution import DemandDistribution
 from routing_svc.demand.plane import mixture_density
 from routing_svc.demand.weights_file import read_edge_weights
 from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork
 from routing_svc.network.snapping import point_on_edge
-from routing_svc.types import NetPosition
-
-IntArray = npt.NDArray[np.int64]
+from routing_svc.types import FloatArray, IntArray, NetPosition
 
 #: Default largest piece of road represented by one atom, in metres.
 DEFAULT_SPACING = 20.0

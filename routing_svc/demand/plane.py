@@ -14,9 +14,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from routing_svc.demand.distribution import DemandDistribution, FloatArray
+from routing_svc.demand.distribution import DemandDistribution
 from routing_svc.errors import InvalidInput
-from routing_svc.types import PlanePosition
+from routing_svc.types import FloatArray, PlanePosition
 
 Bounds = tuple[float, float, float, float]
 

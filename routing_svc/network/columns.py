@@ -25,15 +25,11 @@ from itertools import compress, count
 from operator import is_not
 
 import numpy as np
-import numpy.typing as npt
 
 from routing_svc.network.compile import CompiledNetwork
 from routing_svc.network.search import fleet_columns
 from routing_svc.network.twins import reverse_edges, set_twins, with_twins
-from routing_svc.types import NetPosition
-
-IntArray = npt.NDArray[np.int64]
-FloatArray = npt.NDArray[np.float64]
+from routing_svc.types import FloatArray, IntArray, NetPosition
 
 __all__ = ["SearchColumns", "changed_rows", "write_rows"]
 

@@ -36,11 +36,9 @@ from routing_svc.network.layout import (
 )
 from routing_svc.network.projection import GeoProjection
 from routing_svc.network.safe_xml import check_net_xml_file
+from routing_svc.types import FloatArray, Int32Array
 
 __all__ = ["CompiledNetwork", "NetworkReduction", "compile_network"]
-
-FloatArray = npt.NDArray[np.float64]
-Int32Array = npt.NDArray[np.int32]
 
 
 @dataclass(frozen=True, slots=True)

@@ -15,13 +15,12 @@ from functools import cached_property
 from typing import Literal
 
 import numpy as np
-import numpy.typing as npt
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from routing_svc.errors import InvalidInput, UnknownEdge, Unreachable
 from routing_svc.network.compile import CompiledNetwork
-from routing_svc.types import NetPosition
+from routing_svc.types import FloatArray, IntArray, NetPosition
 
 __all__ = [
     "CostKind",
@@ -33,8 +32,6 @@ __all__ = [
 ]
 
 CostKind = Literal["length", "time"]
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
 
 _MATRIX_CELLS = 4_000_000
 

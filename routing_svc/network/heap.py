@@ -12,14 +12,11 @@ cache line, which makes the search's pops about 10 % cheaper on a large grid.
 
 from __future__ import annotations
 
-import numpy as np
-import numpy.typing as npt
 from numba import njit
 
-__all__ = ["heap_pop", "heap_push"]
+from routing_svc.types import FloatArray, Int32Array
 
-FloatArray = npt.NDArray[np.float64]
-Int32Array = npt.NDArray[np.int32]
+__all__ = ["heap_pop", "heap_push"]
 
 
 @njit(cache=True, inline="always")

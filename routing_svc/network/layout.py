@@ -24,23 +24,21 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
+
+from routing_svc.types import FloatArray, Int32Array, IntArray
 
 __all__ = ["EndStateClasses", "csr_from_arcs", "end_state_classes", "hilbert_order"]
 
-FloatArray = npt.NDArray[np.float64]
-Int32Array = npt.NDArray[np.int32]
-Int64Array = npt.NDArray[np.int64]
 
 _HILBERT_BITS = 16
 
 
-def hilbert_keys(x: Int64Array, y: Int64Array, *, bits: int = _HILBERT_BITS) -> Int64Array:
+def hilbert_keys(x: IntArray, y: IntArray, *, bits: int = _HILBERT_BITS) -> IntArray:
     """Distance along the Hilbert curve of order ``bits`` of integer points in ``[0, 2**bits)``.
 
     Parameters
     ----------
-    x, y : Int64Array
+    x, y : IntArray
         Integer coordinates.
     bits : int
         Order of the curve.
@@ -62,7 +60,7 @@ def hilbert_keys(x: Int64Array, y: Int64Array, *, bits: int = _HILBERT_BITS) -> 
     return keys
 
 
-def hilbert_order(points: FloatArray) -> Int64Array:
+def hilbert_order(points: FloatArray) -> IntArray:
     """Indices that sort ``points`` (shape ``(n, 2)``) along a Hilbert curve (stable)."""
     if points.shape[0] == 0:
         return np.empty(0, dtype=np.int64)
@@ -149,9 +147,7 @@ def _rows_ascending(indptr: Int32Array, indices: Int32Array) -> bool:
     return bool(up.all())
 
 
-def _same_rows(
-    indptr: Int32Array, indices: Int32Array, labels: Int64Array, first: Int64Array
-) -> bool:
+def _same_rows(indptr: Int32Array, indices: Int32Array, labels: IntArray, first: IntArray) -> bool:
     """Whether every row equals the row of ``first[labels[row]]`` (rows sorted ascending)."""
     degree = np.diff(indptr)
     rep = first[labels]
@@ -163,7 +159,7 @@ def _same_rows(
     return bool((indices == indices[other]).all())
 
 
-def _exact_labels(indptr: Int32Array, indices: Int32Array) -> Int64Array:
+def _exact_labels(indptr: Int32Array, indices: Int32Array) -> IntArray:
     """Label rows by content, exactly (``np.unique`` over the rows of each degree)."""
     n = indptr.shape[0] - 1
     degree = np.diff(indptr)
@@ -182,7 +178,7 @@ def _exact_labels(indptr: Int32Array, indices: Int32Array) -> Int64Array:
     return labels
 
 
-def _row_labels(indptr: Int32Array, indices: Int32Array) -> Int64Array:
+def _row_labels(indptr: Int32Array, indices: Int32Array) -> IntArray:
     """Equal labels for equal rows (rows sorted ascending), numbered by first row.
 
     Rows are hashed (a sum of fixed random 64-bit words, one per column),
@@ -212,7 +208,7 @@ def _row_labels(indptr: Int32Array, indices: Int32Array) -> Int64Array:
         np.minimum.at(first, labels, np.arange(n, dtype=np.int64))
     rank = np.empty(first.shape[0], dtype=np.int64)
     rank[np.argsort(first, kind="stable")] = np.arange(first.shape[0], dtype=np.int64)
-    result: Int64Array = rank[labels]
+    result: IntArray = rank[labels]
     return result
 
 

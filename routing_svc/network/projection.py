@@ -24,10 +24,10 @@ import numpy.typing as npt
 from numba import njit
 
 from routing_svc.errors import InvalidInput
+from routing_svc.types import FloatArray
 
 __all__ = ["GeoProjection"]
 
-FloatArray = npt.NDArray[np.float64]
 
 _A = 6378137.0
 _F = 1.0 / 298.257223563

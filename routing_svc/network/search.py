@@ -75,7 +75,7 @@ from numba.extending import intrinsic
 from routing_svc.network.costs import EdgeCosts, position_columns
 from routing_svc.network.heap import heap_pop, heap_push
 from routing_svc.network.layout import EndStateClasses
-from routing_svc.types import NetPosition
+from routing_svc.types import FloatArray, Int32Array, IntArray, NetPosition
 
 __all__ = [
     "ARC_DTYPE",
@@ -100,10 +100,6 @@ STATUS_BAD_POSITION = 3
 STATUS_BAD_SPEED = 4
 STATUS_BAD_GROUP = 5
 STATUS_BAD_COUNTS = 6
-
-Int32Array = npt.NDArray[np.int32]
-Int64Array = npt.NDArray[np.int64]
-FloatArray = npt.NDArray[np.float64]
 
 
 _PREFETCH = "llvm.prefetch.p0" if llvm_binding.llvm_version_info >= (15,) else "llvm.prefetch.p0i8"
@@ -179,7 +175,7 @@ def search_arcs(classes: EndStateClasses, costs: EdgeCosts) -> ArcArray:
     return arcs
 
 
-def fleet_columns(positions: Sequence[NetPosition]) -> tuple[Int64Array, FloatArray]:
+def fleet_columns(positions: Sequence[NetPosition]) -> tuple[IntArray, FloatArray]:
     """Edge indices and offsets of vehicle positions as arrays, not yet checked against a network.
 
     The common case (every edge index a plain ``int``) is converted directly;

@@ -24,7 +24,6 @@ error) is left to them.
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 from numba import njit
 
 from routing_svc.network.columns import changed_rows, write_rows
@@ -33,19 +32,16 @@ from routing_svc.network.costs import EdgeCosts, check_position
 from routing_svc.network.search import (
     STATUS_OK,
     ArcArray,
-    Int32Array,
     SearchBuffers,
     nearest_vehicles,
 )
 from routing_svc.network.twins import set_twins
 from routing_svc.network.walking import walk_spend
 from routing_svc.sa.space import Served
-from routing_svc.types import NetPosition
+from routing_svc.types import FloatArray, Int32Array, IntArray, NetPosition
 
 __all__ = ["FleetUpdate", "refresh_probes", "serve_one"]
 
-IntArray = npt.NDArray[np.int64]
-FloatArray = npt.NDArray[np.float64]
 
 _NO_EDGE = -1
 """Edge index of an unknown entry (``None``)."""

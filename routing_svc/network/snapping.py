@@ -18,11 +18,9 @@ from numba import njit
 
 from routing_svc.errors import InvalidInput, OffNetwork
 from routing_svc.network.compile import CompiledNetwork
-from routing_svc.types import NetPosition
+from routing_svc.types import FloatArray, NetPosition
 
 __all__ = ["Snapper", "point_on_edge"]
-
-FloatArray = npt.NDArray[np.float64]
 
 
 def point_on_edge(network: CompiledNetwork, edge: int, offset: float) -> tuple[float, float]:

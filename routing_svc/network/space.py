@@ -32,7 +32,6 @@ from routing_svc.network.search import (
     STATUS_BAD_SPEED,
     STATUS_UNMET,
     STATUS_UNREACHABLE,
-    Int32Array,
     SearchBuffers,
     arrivals_before,
     nearest_vehicles,
@@ -42,8 +41,8 @@ from routing_svc.network.serving import FleetUpdate
 from routing_svc.network.snapping import point_on_edge
 from routing_svc.network.twins import reverse_edges, twin
 from routing_svc.network.walking import check_route, random_walk, walk_route
-from routing_svc.sa.space import Assignment, FloatArray, IntArray, Requirement
-from routing_svc.types import NetPosition
+from routing_svc.sa.space import Assignment, Requirement
+from routing_svc.types import FloatArray, Int32Array, IntArray, NetPosition
 
 __all__ = ["RoadSpace"]
 

@@ -15,14 +15,10 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-import numpy.typing as npt
 from numba import njit
 
 from routing_svc.network.compile import CompiledNetwork
-from routing_svc.types import NetPosition
-
-IntArray = npt.NDArray[np.int64]
-FloatArray = npt.NDArray[np.float64]
+from routing_svc.types import FloatArray, IntArray, NetPosition
 
 
 @functools.lru_cache(maxsize=32)

@@ -12,19 +12,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import numpy.typing as npt
 from numba import njit
 
 from routing_svc.errors import InvalidInput
 from routing_svc.network.compile import CompiledNetwork
 from routing_svc.network.costs import EdgeCosts
-from routing_svc.types import NetPosition
+from routing_svc.types import FloatArray, Int32Array, IntArray, NetPosition
 
 __all__ = ["check_route", "random_walk", "walk_route", "walk_spend"]
-
-IntArray = npt.NDArray[np.int64]
-Int32Array = npt.NDArray[np.int32]
-FloatArray = npt.NDArray[np.float64]
 
 
 def _check_amount(amount: float) -> float:

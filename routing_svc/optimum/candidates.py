@@ -30,14 +30,11 @@ cost matrix is computed, without changing the optimum.
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 
-from routing_svc.demand import DemandDistribution, FloatArray
+from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork
-from routing_svc.types import NetPosition
-
-IntArray = npt.NDArray[np.int64]
+from routing_svc.types import FloatArray, IntArray, NetPosition
 
 
 def candidate_sites(

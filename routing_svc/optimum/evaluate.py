@@ -23,9 +23,9 @@ from typing import Protocol, TypeVar
 
 import numpy as np
 
-from routing_svc.demand import DemandDistribution, FloatArray
+from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput, Unreachable
-from routing_svc.types import NetPosition, PlanePosition
+from routing_svc.types import FloatArray, NetPosition, PlanePosition
 
 P = TypeVar("P", NetPosition, PlanePosition)
 Q = TypeVar("Q")

@@ -28,12 +28,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import numpy.typing as npt
 import scipy.sparse as sp
 
-from routing_svc.demand import FloatArray
-
-IntArray = npt.NDArray[np.int64]
+from routing_svc.types import FloatArray, IntArray
 
 #: A swap must lower the objective by more than this fraction to be applied.
 SWAP_TOLERANCE = 1e-12

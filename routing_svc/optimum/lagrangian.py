@@ -30,12 +30,8 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
-from routing_svc.demand import FloatArray
-
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
+from routing_svc.types import BoolArray, FloatArray, IntArray
 
 #: A bound must exceed the best value by this fraction to drop or fix a site.
 SAFETY = 1e-9

@@ -47,17 +47,14 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-import numpy.typing as npt
 import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint, milp
 
-from routing_svc.demand import FloatArray
 from routing_svc.errors import InvalidInput
 from routing_svc.optimum.interchange import greedy_interchange, neighbourhood_search
 from routing_svc.optimum.lagrangian import lagrangian_bound
+from routing_svc.types import BoolArray, FloatArray, IntArray
 
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 Method = Literal["auto", "milp", "heuristic"]
 
 #: ``method="auto"`` solves exactly up to this many candidate sites.

@@ -49,7 +49,8 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from routing_svc.paper.result import ExperimentResult, quantile_band, seed_generators, thinned
-from routing_svc.sa.estimators import FloatArray, SpsaGains, rademacher, spsa_from_values
+from routing_svc.sa.estimators import SpsaGains, rademacher, spsa_from_values
+from routing_svc.types import FloatArray
 
 
 @dataclass(frozen=True, slots=True)

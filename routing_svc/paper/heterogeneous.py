@@ -23,7 +23,7 @@ import numpy as np
 from routing_svc.paper.plane_demand import Hotspot, Mixture, distances, feed, plane_fleet
 from routing_svc.paper.result import ExperimentResult, quantile_band, seed_generators
 from routing_svc.sa import ROUTING, FleetConfig, default_schedule
-from routing_svc.sa.estimators import FloatArray
+from routing_svc.types import FloatArray
 
 SIDE = 8.0
 PAIR_CENTRE = (6.0, 6.0)

@@ -40,7 +40,7 @@ from routing_svc.paper.plane_demand import (
 from routing_svc.paper.plane_optimum import best_cooper, cooper, discrete_pmedian
 from routing_svc.paper.result import ExperimentResult, quantile_band, seed_generators
 from routing_svc.sa import COVERAGE, ROUTING, FleetConfig, InverseScaling, default_schedule
-from routing_svc.sa.estimators import FloatArray
+from routing_svc.types import FloatArray
 
 SIDE = 10.0
 DEMAND = Mixture(

@@ -16,8 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from routing_svc.sa import EuclideanPlane, Fleet, FleetConfig, Vehicle
-from routing_svc.sa.estimators import FloatArray
-from routing_svc.types import PlanePosition
+from routing_svc.types import FloatArray, PlanePosition
 
 
 @dataclass(frozen=True, slots=True)

@@ -19,7 +19,7 @@ import numpy as np
 
 from routing_svc.optimum.pmedian import solve_pmedian
 from routing_svc.paper.plane_demand import distances, expected_cost
-from routing_svc.sa.estimators import FloatArray
+from routing_svc.types import FloatArray
 
 
 def weiszfeld(

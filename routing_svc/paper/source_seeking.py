@@ -39,7 +39,6 @@ import numpy as np
 
 from routing_svc.paper.result import ExperimentResult, quantile_band, seed_generators
 from routing_svc.sa.estimators import (
-    FloatArray,
     FormationEstimate,
     GradientEstimate,
     Measurement,
@@ -49,6 +48,7 @@ from routing_svc.sa.estimators import (
     regular_polygon,
     spsa_gradient,
 )
+from routing_svc.types import FloatArray
 
 STRATEGIES = ("formation", "shrinking", "spsa", "kw")
 MEASUREMENTS_PER_PERIOD = {"formation": 3, "shrinking": 3, "spsa": 2, "kw": 4}

@@ -26,7 +26,8 @@ from routing_svc.paper.plane_demand import Hotspot, Mixture, feed, plane_fleet
 from routing_svc.paper.result import ExperimentResult, quantile_band, seed_generators, thinned
 from routing_svc.paper.source_seeking import SourceField
 from routing_svc.sa import ROUTING, Constant, FleetConfig, Floor, InverseScaling, Schedule
-from routing_svc.sa.estimators import FloatArray, SpsaGains, spsa_gradient
+from routing_svc.sa.estimators import SpsaGains, spsa_gradient
+from routing_svc.types import FloatArray
 
 RULES = ("decreasing", "floor", "constant")
 SIDE = 10.0

@@ -30,11 +30,9 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-import numpy.typing as npt
 
 from routing_svc.errors import InvalidInput
-
-FloatArray = npt.NDArray[np.float64]
+from routing_svc.types import FloatArray
 
 Measurement = Callable[[FloatArray, np.random.Generator], FloatArray]
 """``measure(points, rng) -> values``: one noisy measurement per row of ``points``."""

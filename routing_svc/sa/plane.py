@@ -12,8 +12,8 @@ import math
 import numpy as np
 
 from routing_svc.errors import InvalidInput, UnmetRequirement, Unreachable
-from routing_svc.sa.space import Assignment, FloatArray, Requirement
-from routing_svc.types import PlanePosition
+from routing_svc.sa.space import Assignment, Requirement
+from routing_svc.types import FloatArray, PlanePosition
 
 
 class EuclideanPlane:

@@ -20,13 +20,11 @@ from dataclasses import dataclass
 from typing import Generic, NamedTuple, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
-import numpy.typing as npt
+
+from routing_svc.types import FloatArray, IntArray
 
 P = TypeVar("P")
 P_co = TypeVar("P_co", covariant=True)
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
 
 
 @dataclass(frozen=True, slots=True)

@@ -8,14 +8,11 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-import numpy.typing as npt
 import pytest
 import sumo
 
 from routing_svc.network import CompiledNetwork, load_network
-from routing_svc.types import PlanePosition
-
-FloatArray = npt.NDArray[np.float64]
+from routing_svc.types import FloatArray, PlanePosition
 
 DRT_NET = Path(sumo.SUMO_HOME) / "tools" / "game" / "DRT" / "osm.net.xml"
 

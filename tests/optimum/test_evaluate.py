@@ -11,8 +11,8 @@ from routing_svc.demand import DemandDistribution, gaussian_mixture, uniform_by_
 from routing_svc.errors import InvalidInput, Unreachable
 from routing_svc.network import CompiledNetwork, RoadSpace
 from routing_svc.optimum import expected_cost, gap
-from routing_svc.types import NetPosition, PlanePosition
-from tests.optimum.conftest import FloatArray, PlaneCosts, WindyCosts
+from routing_svc.types import FloatArray, NetPosition, PlanePosition
+from tests.optimum.conftest import PlaneCosts, WindyCosts
 
 
 def loop_cost(

@@ -11,7 +11,8 @@ from routing_svc.errors import InvalidInput
 from routing_svc.optimum.interchange import greedy_interchange, neighbourhood_search
 from routing_svc.optimum.lagrangian import lagrangian_bound
 from routing_svc.optimum.pmedian import objective, solve_pmedian
-from tests.optimum.conftest import FloatArray, all_subset_values, brute_force_pmedian
+from routing_svc.types import FloatArray
+from tests.optimum.conftest import all_subset_values, brute_force_pmedian
 
 
 def euclidean_instance(rng: np.random.Generator, n: int, m: int) -> tuple[FloatArray, FloatArray]:

@@ -10,7 +10,6 @@ import pytest
 
 from routing_svc.errors import InvalidInput
 from routing_svc.sa.estimators import (
-    FloatArray,
     SpsaGains,
     descend,
     formation_gradient,
@@ -21,6 +20,7 @@ from routing_svc.sa.estimators import (
     spsa_from_values,
     spsa_gradient,
 )
+from routing_svc.types import FloatArray
 
 HESSIAN = np.array([[3.0, 1.0, 0.0], [1.0, 2.0, -0.5], [0.0, -0.5, 1.0]])
 LINEAR = np.array([0.5, -1.0, 2.0])
