@@ -56,6 +56,8 @@ MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
 
 _MIGRATION_LOCK_KEY = 0x726F7574  # pg_advisory_xact_lock key serialising migrations
 _PG_DURABILITY = ("fsync", "synchronous_commit", "full_page_writes")
+_SQLITE_BEGIN = {mode: f"BEGIN {mode}" for mode in ("IMMEDIATE", "DEFERRED", "EXCLUSIVE")}
+"""The statement that begins a transaction in each BEGIN mode."""
 
 
 def create_store_engine(url: str, *, busy_timeout_ms: int) -> Engine:
@@ -127,10 +129,6 @@ def _install_sqlite_hooks(engine: Engine, *, busy_timeout_ms: int) -> None:
         driver = connection.connection.dbapi_connection
         assert driver is not None
         driver.execute(statement)
-
-
-_SQLITE_BEGIN = {mode: f"BEGIN {mode}" for mode in ("IMMEDIATE", "DEFERRED", "EXCLUSIVE")}
-"""The statement that begins a transaction in each BEGIN mode."""
 
 
 def _switch_to_wal(cursor: Any, *, busy_timeout_ms: int) -> str:
