@@ -6,6 +6,7 @@
     RoadSpace(network, cost=...)   -> Space[NetPosition]   (space.py)
     Snapper(network).snap_xy/snap_lonlat -> [NetPosition]  (snapping.py)
     read_net_bytes(data, max_bytes=...) -> safe XML bytes  (safe_xml.py)
+    network_sha256(path or bytes) -> the network's identity (identity.py)
 """
 
 from routing_svc.network.cache import default_cache_dir, load_network

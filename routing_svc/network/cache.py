@@ -1,8 +1,9 @@
 """Load a SUMO network, compiling it once and caching the result on disk.
 
 A compiled network is stored as two files in the cache directory, named by a
-key that hashes the network file's bytes (SHA-256), the vehicle class and the
-compile-format version: ``<key>.npz`` holds the arrays (``numpy.savez``,
+key that hashes the network's identity (the SHA-256 of its plain XML, see
+:mod:`routing_svc.network.identity`: a file and its ``.gz`` share one entry),
+the vehicle class and the compile-format version: ``<key>.npz`` holds the arrays (``numpy.savez``,
 loaded with ``allow_pickle=False``) and ``<key>.json`` the ids and the rest.
 Both are written to temporary files and renamed into place, so concurrent
 loaders never see half a file. A cached load does not import sumolib.
@@ -25,6 +26,7 @@ import numpy as np
 
 from routing_svc.errors import InvalidNetwork, UnknownNetwork
 from routing_svc.network.compile import CompiledNetwork, NetworkReduction, compile_network
+from routing_svc.network.identity import network_sha256
 from routing_svc.network.projection import GeoProjection
 
 __all__ = ["COMPILE_FORMAT", "default_cache_dir", "load_network"]
@@ -49,11 +51,6 @@ def default_cache_dir() -> Path:
     """``$ROUTING_SVC_CACHE``, or ``~/.cache/routing_svc``."""
     configured = os.environ.get("ROUTING_SVC_CACHE")
     return Path(configured) if configured else Path.home() / ".cache" / "routing_svc"
-
-
-def _file_sha256(path: Path) -> str:
-    with path.open("rb") as f:
-        return hashlib.file_digest(f, "sha256").hexdigest()
 
 
 def _cache_key(source_sha256: str, vclass: str) -> str:
@@ -92,7 +89,7 @@ def load_network(
     source = Path(path)
     if not source.is_file():
         raise UnknownNetwork(f"no network file at {source}")
-    digest = _file_sha256(source)
+    digest = network_sha256(source)
     directory = cache_dir if cache_dir is not None else default_cache_dir()
     stem = directory / _cache_key(digest, vclass)
     cached = _read_cache(stem, digest, vclass)

@@ -75,7 +75,8 @@ class CompiledNetwork:
     vclass : str
         The SUMO vehicle class the graph was compiled for.
     source_sha256 : str
-        SHA-256 of the network file's bytes.
+        The network's identity: SHA-256 of its plain XML
+        (:func:`routing_svc.network.identity.network_sha256`).
     edge_ids : tuple[str, ...]
         SUMO edge id of every graph node.
     length : FloatArray
@@ -306,7 +307,7 @@ def compile_network(path: Path, *, vclass: str, source_sha256: str) -> CompiledN
     vclass : str
         SUMO vehicle class, e.g. ``"passenger"``.
     source_sha256 : str
-        SHA-256 of the file's bytes (recorded in the result).
+        The network's identity (recorded in the result).
 
     Raises
     ------

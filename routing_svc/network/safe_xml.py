@@ -27,7 +27,14 @@ from xml.parsers import expat
 
 from routing_svc.errors import InvalidInput, InvalidNetwork, PayloadTooLarge
 
-__all__ = ["GZIP_MAGIC", "MAX_DEPTH", "check_net_xml", "check_net_xml_file", "read_net_bytes"]
+__all__ = [
+    "GZIP_MAGIC",
+    "MAX_DEPTH",
+    "check_net_xml",
+    "check_net_xml_file",
+    "plain_xml_chunks",
+    "read_net_bytes",
+]
 
 GZIP_MAGIC = b"\x1f\x8b"
 MAX_DEPTH = 64
@@ -191,10 +198,30 @@ def check_net_xml_file(path: Path) -> None:
         The network file; gzip content is recognised by its magic bytes.
     """
     parser, screen = _new_parser()
-    with path.open("rb") as raw:
+    for chunk in plain_xml_chunks(path):
+        _finish(parser, screen, chunk, final=False)
+    _finish(parser, screen, b"", final=True)
+
+
+def plain_xml_chunks(source: Path | bytes) -> Iterator[bytes]:
+    """Yield the plain XML of a network file or of its bytes, a chunk at a time.
+
+    Parameters
+    ----------
+    source : Path or bytes
+        A ``.net.xml`` or ``.net.xml.gz`` file, or its content; gzip content is
+        recognised by its magic bytes and inflated as it is read.
+
+    Raises
+    ------
+    InvalidNetwork
+        If the gzip stream is corrupt or truncated.
+    """
+    if not isinstance(source, Path):
+        yield from _inflate([source]) if source[:2] == GZIP_MAGIC else [source]
+        return
+    with source.open("rb") as raw:
         gzipped = raw.read(2) == GZIP_MAGIC
         raw.seek(0)
         chunks: Iterable[bytes] = iter(lambda: raw.read(_CHUNK), b"")
-        for chunk in _inflate(chunks) if gzipped else chunks:
-            _finish(parser, screen, chunk, final=False)
-    _finish(parser, screen, b"", final=True)
+        yield from _inflate(chunks) if gzipped else chunks

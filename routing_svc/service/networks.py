@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -12,6 +11,7 @@ import numpy as np
 
 from routing_svc.errors import InvalidInput, InvalidNetwork, UnknownEdge, UnknownNetwork
 from routing_svc.network import CompiledNetwork, RoadSpace, Snapper, load_network
+from routing_svc.network.identity import network_sha256
 from routing_svc.network.safe_xml import check_net_xml_file, read_net_bytes
 from routing_svc.sa.space import Requirement
 from routing_svc.service.schemas import EdgePosition, LonLatPosition, Position, XYPosition
@@ -173,11 +173,13 @@ class NetworkRegistry:
             return entry
 
     def store_upload(self, data: bytes | bytearray) -> tuple[str, Path]:
-        """Check an uploaded network and write it under ``data_dir``; return its hash and path."""
+        """Check an uploaded network and write it under ``data_dir``; return its identity
+        (:func:`~routing_svc.network.identity.network_sha256`, the same for the ``.gz``
+        and the plain file) and path."""
         if not data:
             raise InvalidNetwork("empty upload: send the bytes of a .net.xml or .net.xml.gz")
         xml = read_net_bytes(data, max_bytes=self.max_bytes)  # type: ignore[arg-type]
-        digest = hashlib.sha256(xml).hexdigest()
+        digest = network_sha256(xml)
         self.data_dir.mkdir(parents=True, exist_ok=True)
         path = self.data_dir / f"{digest}.net.xml"
         if not path.exists():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gzip
+import hashlib
 import json
 import subprocess
 import sys
@@ -14,6 +15,7 @@ import pytest
 
 from routing_svc.errors import InvalidNetwork, UnknownNetwork
 from routing_svc.network import CompiledNetwork, default_cache_dir, load_network
+from routing_svc.network.identity import network_sha256
 from tests.network.conftest import DRT_NET, NetCase
 
 
@@ -148,3 +150,17 @@ def test_malformed_file_is_an_invalid_network(tmp_path: Path) -> None:
     with pytest.raises(InvalidNetwork, match="malformed"):
         load_network(path, cache_dir=tmp_path)
     assert not any(tmp_path.glob("*.npz"))
+
+
+def test_a_file_and_its_gzip_are_one_network(oneway_path: Path, tmp_path: Path) -> None:
+    plain = oneway_path.read_bytes()
+    packed = tmp_path / "oneway.net.xml.gz"
+    packed.write_bytes(gzip.compress(plain))
+    identity = hashlib.sha256(plain).hexdigest()
+    assert network_sha256(oneway_path) == network_sha256(packed) == identity
+    assert network_sha256(plain) == network_sha256(gzip.compress(plain)) == identity
+    cache = tmp_path / "cache"
+    first = load_network(packed, cache_dir=cache)
+    assert load_network(oneway_path, cache_dir=cache).source_sha256 == identity
+    assert len(cache_files(cache)) == 2  # one compiled entry for both forms
+    assert first.source_sha256 == identity
