@@ -16,19 +16,26 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 from routing_svc import __version__
 from routing_svc.errors import Conflict, StorageError
+from routing_svc.network.identity import file_bytes_sha256
 from routing_svc.service.demo import ensure_demo_fleet, feed_demo_targets
 from routing_svc.service.fastpath import TARGET_PATH, TargetFastPath
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.guards import Guards
-from routing_svc.service.networks import NetworkRegistry
+from routing_svc.service.networks import NetworkEntry, NetworkRegistry
 from routing_svc.service.problems import install_problem_handlers
 from routing_svc.service.routes import dashboard, fleets, health, networks, stream, targets
 from routing_svc.service.settings import Settings
-from routing_svc.store import EventLog
+from routing_svc.store import EventLog, NetworkRecord
 
 
 def load_networks(registry: NetworkRegistry, log: EventLog, settings: Settings) -> None:
-    """Load the start-up networks and every network registered in the database."""
+    """Load the start-up networks and every network registered in the database.
+
+    A network is registered under its identity
+    (:func:`~routing_svc.network.identity.network_sha256`); a record stored under
+    the former start-up identity of the same file is re-keyed first
+    (:func:`rekey_legacy`).
+    """
     for name, path in settings.networks.items():
         entry = registry.load(name, Path(path), name=name)
         known = {n.id: n for n in log.list_networks()}
@@ -44,14 +51,29 @@ def load_networks(registry: NetworkRegistry, log: EventLog, settings: Settings) 
             except Conflict:
                 # another instance (or worker) starting at the same time registered it first
                 known = {n.id: n for n in log.list_networks()}
-        if known[name].sha256 != entry.network.source_sha256:
+        record = rekey_legacy(log, known[name], entry)
+        if record.sha256 != entry.network.source_sha256:
             raise StorageError(
-                f"network {name!r} is stored with other content (sha256 {known[name].sha256}) "
+                f"network {name!r} is stored with other content (sha256 {record.sha256}) "
                 f"than {path}; fleets on it would not replay. Use another name."
             )
     for record in log.list_networks():
         if record.id not in registry and Path(record.path).is_file():
-            registry.load(record.id, Path(record.path), name=record.name)
+            rekey_legacy(log, record, registry.load(record.id, Path(record.path), name=record.name))
+
+
+def rekey_legacy(log: EventLog, record: NetworkRecord, entry: NetworkEntry) -> NetworkRecord:
+    """``record``, moved to the identity of ``entry`` if it holds the former one.
+
+    Start-up networks used to be stored under the SHA-256 of the file's bytes
+    (for a ``.gz`` file, of the compressed bytes). When ``record`` holds that
+    hash of ``entry``'s file, the record is re-keyed to the network's identity;
+    any other hash is returned unchanged.
+    """
+    identity = entry.network.source_sha256
+    if record.sha256 == identity or record.sha256 != file_bytes_sha256(entry.path):
+        return record
+    return log.rekey_network(record.id, old_sha256=record.sha256, new_sha256=identity)
 
 
 class ServiceApp(FastAPI):

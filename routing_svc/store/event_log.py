@@ -169,6 +169,26 @@ class EventLog:
             conn.execute(sa.insert(networks), row)
         return self.get_network(network_id)
 
+    def rekey_network(self, network_id: str, *, old_sha256: str, new_sha256: str) -> NetworkRecord:
+        """Store ``new_sha256`` as the hash of a network stored under ``old_sha256``.
+
+        Only the hash changes: fleets name their network by id, so their events
+        replay as before. A record that no longer holds ``old_sha256`` (another
+        instance re-keyed it first) is left as it is.
+
+        Raises
+        ------
+        UnknownNetwork
+            If ``network_id`` is not registered.
+        """
+        with self._write(f"re-key network {network_id!r}") as conn:
+            conn.execute(
+                sa.update(networks)
+                .where(networks.c.id == network_id, networks.c.sha256 == old_sha256)
+                .values(sha256=new_sha256)
+            )
+        return self.get_network(network_id)
+
     def get_network(self, network_id: str) -> NetworkRecord:
         """Return a network; :class:`UnknownNetwork` if there is none."""
         with self._read("read a network") as conn:
