@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Query, Request
+from fastapi import APIRouter, Depends, Query, Request, Response
 from starlette.concurrency import run_in_threadpool
 
-from routing_svc.errors import Conflict, InvalidNetwork, PayloadTooLarge
+from routing_svc.errors import Conflict, PayloadTooLarge
 from routing_svc.service.deps import fleet_service, network_registry
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.networks import NetworkRegistry
@@ -49,14 +49,26 @@ async def read_limited(request: Request, limit: int) -> bytearray:
     return data
 
 
-@router.post("", status_code=201, openapi_extra=NET_BODY)
+UPLOAD_RESPONSES: dict[int | str, dict[str, Any]] = {
+    200: {"description": "The network is already known under this id with the same content."},
+}
+
+
+@router.post("", status_code=201, responses=UPLOAD_RESPONSES, openapi_extra=NET_BODY)
 async def upload_network(
     request: Request,
+    response: Response,
     registry: Annotated[NetworkRegistry, Depends(network_registry)],
     service: Annotated[FleetService, Depends(fleet_service)],
     name: Annotated[Identifier | None, Query()] = None,
 ) -> dict[str, Any]:
-    """Upload a SUMO ``.net.xml`` or ``.net.xml.gz``; it is checked, compiled and kept."""
+    """Upload a SUMO ``.net.xml`` or ``.net.xml.gz``; it is checked, compiled and kept.
+
+    A network is identified by the SHA-256 of its plain XML, whether it was
+    named at start-up or uploaded, gzipped or not. The same content under a
+    known id answers 200 with that network; other content under a known id
+    is a 409.
+    """
     data = await read_limited(request, registry.max_bytes)
 
     def register() -> dict[str, Any]:
@@ -66,11 +78,9 @@ async def upload_network(
             existing = registry.get(network_id)
             if existing.network.source_sha256 != digest:
                 raise Conflict(f"network {network_id!r} exists with other content")
+            response.status_code = 200
             return existing.summary()
-        try:
-            entry = registry.load(network_id, path, name=name or network_id)
-        except InvalidNetwork:
-            raise
+        entry = registry.load(network_id, path, name=name or network_id)
         service.log.create_network(network_id, sha256=digest, path=str(path), name=entry.name)
         return entry.summary()
 
