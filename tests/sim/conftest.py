@@ -11,6 +11,7 @@ import socket
 import threading
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -75,18 +76,19 @@ def _free_port() -> int:
         return port
 
 
-@pytest.fixture
-def fleet_server(grid_net: Path, tmp_path: Path) -> Iterator[str]:
-    """The REST service (``create_app`` under uvicorn, in a thread) with the grid; its URL."""
+@contextmanager
+def serve_fleets(networks: dict[str, Path], folder: Path) -> Iterator[str]:
+    """The REST service (``create_app`` under uvicorn, in a thread) started with
+    ``networks`` (as ``serve --net NAME=FILE``); its URL."""
     import uvicorn
 
     from routing_svc.service.app import create_app
     from routing_svc.service.settings import Settings
 
     settings = Settings(
-        database_url=f"sqlite:///{tmp_path / 'service.db'}",
-        networks={"grid": str(grid_net)},
-        data_dir=tmp_path / "networks",
+        database_url=f"sqlite:///{folder / 'service.db'}",
+        networks={name: str(path) for name, path in networks.items()},
+        data_dir=folder / "networks",
     )
     port = _free_port()
     server = uvicorn.Server(
@@ -106,3 +108,10 @@ def fleet_server(grid_net: Path, tmp_path: Path) -> Iterator[str]:
     finally:
         server.should_exit = True
         thread.join(timeout=30)
+
+
+@pytest.fixture
+def fleet_server(grid_net: Path, tmp_path: Path) -> Iterator[str]:
+    """The REST service with the grid; its URL."""
+    with serve_fleets({"grid": grid_net}, tmp_path) as url:
+        yield url

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import gzip
 import math
 from dataclasses import replace
 from pathlib import Path
 
+import httpx
+
 from routing_svc.sim import CosimResult, CosimSpec, parse_policies, run_cosim
 from routing_svc.sim.plots import write_figures
+from tests.sim.conftest import serve_fleets
 
 
 def test_traffic_costs_push_sumo_travel_times(small_spec: CosimSpec, tmp_path: Path) -> None:
@@ -39,3 +43,25 @@ def test_tracking_moving_hotspots(small_spec: CosimSpec, tmp_path: Path) -> None
     figures = write_figures(result, out_dir=tmp_path / "figures", prefix="tracking")
     assert set(figures) == {"waits", "positions", "objective"}
     assert all(p.stat().st_size > 1000 for p in figures.values())
+
+
+def test_cosim_over_http_with_the_service_started_on_the_same_gzipped_network(
+    grid_net: Path, small_spec: CosimSpec, tmp_path: Path
+) -> None:
+    net = tmp_path / "grid.net.xml.gz"  # the cosim adds it as "grid", the name it was started with
+    net.write_bytes(gzip.compress(grid_net.read_bytes()))
+    with serve_fleets({"grid": net}, tmp_path) as url:
+        spec = replace(
+            small_spec,
+            network=str(net),
+            policies=parse_policies("sa"),
+            service_url=url,
+            duration=300.0,
+            warmup=60.0,
+            drain=240.0,
+            history=20,
+        )
+        (run,) = run_cosim(spec, out_dir=tmp_path / "out", progress=False).runs
+        networks = httpx.get(url + "/v1/networks").json()["items"]
+    assert run.requests >= 1 and run.served >= run.requests - 1
+    assert [n["id"] for n in networks] == ["grid"]
