@@ -176,7 +176,7 @@ class NetworkRegistry:
         """Check an uploaded network and write it under ``data_dir``; return its hash and path."""
         if not data:
             raise InvalidNetwork("empty upload: send the bytes of a .net.xml or .net.xml.gz")
-        xml = read_net_bytes(data, max_bytes=self.max_bytes)  # type: ignore[arg-type]
+        xml = read_net_bytes(data, max_bytes=self.max_bytes)
         digest = hashlib.sha256(xml).hexdigest()
         self.data_dir.mkdir(parents=True, exist_ok=True)
         path = self.data_dir / f"{digest}.net.xml"
