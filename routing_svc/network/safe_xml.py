@@ -54,7 +54,8 @@ __all__ = [
 GZIP_MAGIC = b"\x1f\x8b"
 MAX_DEPTH = 64
 """Deepest nesting of elements."""
-_CHUNK = 1 << 20
+_CHUNK = 1 << 18
+"""Bytes screened and parsed at a time (256 KiB)."""
 
 
 def read_net_bytes(data: bytes | bytearray, *, max_bytes: int) -> bytes | bytearray:
