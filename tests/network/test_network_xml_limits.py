@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from routing_svc.errors import InvalidNetwork, XmlLimitExceeded
-from routing_svc.network import read_net_bytes
+from routing_svc.network import load_network, read_net_bytes
 from routing_svc.network.safe_xml import XmlScreen, check_net_xml_file, check_xml_file
 from routing_svc.network.xml_limits import (
     ELEMENT_ALLOWANCE,
@@ -185,3 +185,13 @@ def test_openstreetmap_extract_is_within_the_limits() -> None:
     check_xml_file(SHARED / "badhersfeld.osm.xml.gz", root="osm")
     with pytest.raises(InvalidNetwork, match="root element"):
         check_net_xml_file(SHARED / "badhersfeld.osm.xml.gz")
+
+
+@pytest.mark.parametrize("gzipped", [False, True], ids=["plain", "gzip"])
+def test_files_on_disk_get_the_same_limits(tmp_path: Path, gzipped: bool) -> None:
+    """The start-up path (``--net``): a file past a limit never reaches sumolib."""
+    document = long_value(MAX_ATTRIBUTE_BYTES + 1)
+    path = tmp_path / ("big.net.xml.gz" if gzipped else "big.net.xml")
+    path.write_bytes(gzip.compress(document) if gzipped else document)
+    with pytest.raises(XmlLimitExceeded, match="attribute value"):
+        load_network(path, cache_dir=tmp_path)
