@@ -13,6 +13,7 @@
     ├── Unreachable             a target that no vehicle can reach
     ├── OffNetwork              a coordinate too far from any usable edge
     ├── InvalidNetwork          a network file that cannot be used (malformed, hostile, empty)
+    │   └── XmlLimitExceeded    XML past one of the screen's limits (names the limit)
     ├── Conflict                an id that already exists, an idempotency key reused for other input
     ├── PayloadTooLarge         a body or a decompressed file beyond the configured limit
     ├── StorageError            the store refused to work (e.g. unsafe durability settings)
@@ -32,6 +33,10 @@ class RoutingSvcError(Exception):
     def __init__(self, detail: str) -> None:
         super().__init__(detail)
         self.detail = detail
+
+    def problem_members(self) -> dict[str, object]:
+        """Extension members of this error's problem+json body (RFC 9457, section 3.2)."""
+        return {}
 
 
 class InvalidInput(RoutingSvcError):
@@ -72,6 +77,30 @@ class OffNetwork(RoutingSvcError):
 
 class InvalidNetwork(RoutingSvcError):
     title = "Invalid network"
+
+
+class XmlLimitExceeded(InvalidNetwork):
+    """An XML document past one of the limits of :mod:`routing_svc.network.xml_limits`.
+
+    Parameters
+    ----------
+    detail : str
+        What was found, in words.
+    limit : str
+        The name of the limit's constant, e.g. ``"MAX_ATTRIBUTE_BYTES"``.
+    maximum : int
+        The limit's value for this document.
+    """
+
+    title = "XML limit exceeded"
+
+    def __init__(self, detail: str, *, limit: str, maximum: int) -> None:
+        super().__init__(detail)
+        self.limit = limit
+        self.maximum = maximum
+
+    def problem_members(self) -> dict[str, object]:
+        return {"limit": self.limit, "maximum": self.maximum}
 
 
 class Conflict(RoutingSvcError):

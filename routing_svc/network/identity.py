@@ -20,7 +20,7 @@ from routing_svc.network.safe_xml import plain_xml_chunks
 __all__ = ["file_bytes_sha256", "network_sha256"]
 
 
-def network_sha256(source: Path | bytes) -> str:
+def network_sha256(source: Path | bytes | bytearray) -> str:
     """SHA-256 (hex) of a network's plain XML.
 
     Parameters

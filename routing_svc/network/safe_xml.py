@@ -8,14 +8,22 @@ only if
   with a streaming decompressor that stops as soon as the limit is passed, so
   a gzip bomb costs at most ``max_bytes`` of memory
   (:class:`~routing_svc.errors.PayloadTooLarge`);
+- the XML stays within the bounds of :mod:`routing_svc.network.xml_limits`
+  (attribute values, attributes per element, tags, elements per byte) and
+  runs of text are at most :data:`~routing_svc.network.xml_limits.MAX_TEXT_CHARS`
+  long (:class:`~routing_svc.errors.XmlLimitExceeded`, naming the limit);
 - the XML is well formed, declares no DOCTYPE and no entity (which rules out
   external entities and "billion laughs" expansion), nests no deeper than
   :data:`MAX_DEPTH` elements, and its root element is ``<net>``
   (:class:`~routing_svc.errors.InvalidNetwork` otherwise).
 
-The check runs the C expat parser over the bytes with a handful of Python
-callbacks; it takes about half a second for 10 MB of the most element-dense
-input.
+:class:`XmlScreen` does the checks over a stream of chunks: each chunk goes
+first through the byte-level :class:`~routing_svc.network.xml_limits.ByteScreen`,
+then to the C expat parser with a handful of Python callbacks. Files on disk
+(networks named at start-up, and any other XML file read from outside, such
+as an OpenStreetMap extract with ``root="osm"``) go through the same screen
+with :func:`check_xml_file`. Time and memory are linear in the document:
+the parser never holds more than a chunk and one bounded token.
 """
 
 from __future__ import annotations
@@ -25,41 +33,55 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from xml.parsers import expat
 
-from routing_svc.errors import InvalidInput, InvalidNetwork, PayloadTooLarge
+from routing_svc.errors import InvalidInput, InvalidNetwork, PayloadTooLarge, XmlLimitExceeded
+from routing_svc.network.xml_limits import (
+    MAX_MARKUP_BYTES,
+    MAX_TEXT_CHARS,
+    ByteScreen,
+    markup_too_long,
+)
 
 __all__ = [
     "GZIP_MAGIC",
     "MAX_DEPTH",
+    "XmlScreen",
     "check_net_xml",
     "check_net_xml_file",
+    "check_xml_file",
     "plain_xml_chunks",
     "read_net_bytes",
 ]
 
 GZIP_MAGIC = b"\x1f\x8b"
 MAX_DEPTH = 64
-_CHUNK = 1 << 20
+"""Deepest nesting of elements."""
+_CHUNK = 1 << 18
+"""Bytes screened and parsed at a time (256 KiB)."""
 
 
-def read_net_bytes(data: bytes, *, max_bytes: int) -> bytes:
+def read_net_bytes(data: bytes | bytearray, *, max_bytes: int) -> bytes | bytearray:
     """Return the validated XML bytes of an uploaded SUMO network.
 
     Parameters
     ----------
-    data : bytes
+    data : bytes or bytearray
         The uploaded file: plain XML or gzip-compressed XML.
     max_bytes : int
         Largest accepted size of the (decompressed) XML, in bytes.
 
     Returns
     -------
-    bytes
-        The plain (decompressed) XML, safe to write to disk and hand to sumolib.
+    bytes or bytearray
+        The plain (decompressed) XML, safe to write to disk and hand to sumolib:
+        ``data`` itself (not a copy) when it was not compressed.
 
     Raises
     ------
     PayloadTooLarge
         If the content, after decompression, exceeds ``max_bytes``.
+    XmlLimitExceeded
+        If the XML passes one of the limits of :mod:`~routing_svc.network.xml_limits`
+        or :data:`~routing_svc.network.xml_limits.MAX_TEXT_CHARS`.
     InvalidNetwork
         If the gzip stream is corrupt, or the XML is malformed, declares a
         DOCTYPE or an entity, nests too deeply, or its root is not ``<net>``.
@@ -68,21 +90,32 @@ def read_net_bytes(data: bytes, *, max_bytes: int) -> bytes:
     """
     if max_bytes <= 0:
         raise InvalidInput(f"max_bytes must be positive, got {max_bytes}")
-    xml = _gunzip_limited(data, max_bytes=max_bytes) if data[:2] == GZIP_MAGIC else data
-    if len(xml) > max_bytes:
+    if data[:2] == GZIP_MAGIC:
+        return _gunzip_screened(data, max_bytes=max_bytes)
+    if len(data) > max_bytes:
         raise PayloadTooLarge(f"network file larger than {max_bytes} bytes")
-    check_net_xml(xml)
-    return xml
+    check_net_xml(data)
+    return data
 
 
-def _gunzip_limited(data: bytes, *, max_bytes: int) -> bytes:
-    """Inflate the gzip stream ``data``, stopping once ``max_bytes`` is passed."""
+def _gunzip_screened(data: bytes | bytearray, *, max_bytes: int) -> bytes:
+    """Inflate and screen the gzip stream ``data``, stopping at the first limit passed."""
+    screen = XmlScreen(root="net")
     out = bytearray()
-    for piece in _inflate([data]):
-        out += piece
-        if len(out) > max_bytes:
+    for piece in _inflate(_pieces(data)):
+        if len(out) + len(piece) > max_bytes:
             raise PayloadTooLarge(f"decompressed network larger than {max_bytes} bytes")
+        screen.feed(piece)
+        out += piece
+    screen.close()
     return bytes(out)
+
+
+def _pieces(data: bytes | bytearray) -> Iterator[bytes]:
+    """``data`` in pieces of at most ``_CHUNK`` bytes."""
+    view = memoryview(data)
+    for start in range(0, len(view), _CHUNK):
+        yield bytes(view[start : start + _CHUNK])
 
 
 def _inflate(chunks: Iterable[bytes]) -> Iterator[bytes]:
@@ -120,24 +153,37 @@ def _inflate(chunks: Iterable[bytes]) -> Iterator[bytes]:
         raise InvalidNetwork("truncated gzip stream")
 
 
-class _Screen:
-    """Expat callbacks that reject DTDs and entities and bound the nesting depth."""
+class _Callbacks:
+    """Expat callbacks: reject DTDs and entities, bound nesting and runs of text."""
 
-    def __init__(self) -> None:
+    def __init__(self, root: str) -> None:
+        self.expected_root = root
         self.depth = 0
         self.root: str | None = None
+        self.text = 0
 
     def start(self, name: str, _attributes: list[str]) -> None:
         if self.root is None:
             self.root = name
-            if name != "net":
-                raise InvalidNetwork(f"root element is <{name}>, expected <net>")
+            if name != self.expected_root:
+                raise InvalidNetwork(f"root element is <{name}>, expected <{self.expected_root}>")
         self.depth += 1
         if self.depth > MAX_DEPTH:
             raise InvalidNetwork(f"XML nested deeper than {MAX_DEPTH} elements")
+        self.text = 0
 
     def end(self, _name: str) -> None:
         self.depth -= 1
+        self.text = 0
+
+    def characters(self, data: str) -> None:
+        self.text += len(data)
+        if self.text > MAX_TEXT_CHARS:
+            raise XmlLimitExceeded(
+                f"a run of text is longer than {MAX_TEXT_CHARS} characters",
+                limit="MAX_TEXT_CHARS",
+                maximum=MAX_TEXT_CHARS,
+            )
 
     @staticmethod
     def doctype(*_args: object) -> None:
@@ -152,41 +198,101 @@ class _Screen:
         raise InvalidNetwork("external entities are not allowed in a network file")
 
 
-def _new_parser() -> tuple[expat.XMLParserType, _Screen]:
-    screen = _Screen()
-    parser = expat.ParserCreate()
-    parser.ordered_attributes = True
-    parser.buffer_text = True
-    parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
-    parser.StartElementHandler = screen.start
-    parser.EndElementHandler = screen.end
-    parser.StartDoctypeDeclHandler = screen.doctype
-    parser.EntityDeclHandler = screen.entity
-    parser.UnparsedEntityDeclHandler = screen.entity
-    parser.NotationDeclHandler = screen.entity
-    parser.ExternalEntityRefHandler = screen.external_entity
-    return parser, screen
+class XmlScreen:
+    """All checks on an untrusted XML document, fed in chunks.
 
-
-def _finish(parser: expat.XMLParserType, screen: _Screen, chunk: bytes, *, final: bool) -> None:
-    try:
-        parser.Parse(chunk, final)
-    except expat.ExpatError as exc:
-        raise InvalidNetwork(f"malformed XML: {exc}") from None
-    if final and screen.root is None:
-        raise InvalidNetwork("the file holds no XML element")
-
-
-def check_net_xml(xml: bytes) -> None:
-    """Raise :class:`InvalidNetwork` unless ``xml`` is a safe, well-formed ``<net>`` document.
+    Each chunk passes the byte-level :class:`~routing_svc.network.xml_limits.ByteScreen`
+    before expat parses it; after each chunk, the token expat still holds
+    unfinished (a tag, comment or processing instruction) may not be longer
+    than :data:`~routing_svc.network.xml_limits.MAX_MARKUP_BYTES`.
 
     Parameters
     ----------
-    xml : bytes
-        Plain (not compressed) XML.
+    root : str
+        The name the root element must have (``"net"`` for a SUMO network).
     """
-    parser, screen = _new_parser()
-    _finish(parser, screen, xml, final=True)
+
+    def __init__(self, *, root: str) -> None:
+        self.bytes = ByteScreen()
+        self.callbacks = _Callbacks(root)
+        self.fed = 0
+        parser = expat.ParserCreate()
+        parser.ordered_attributes = True
+        parser.buffer_text = True
+        parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
+        parser.StartElementHandler = self.callbacks.start
+        parser.EndElementHandler = self.callbacks.end
+        parser.CharacterDataHandler = self.callbacks.characters
+        parser.StartDoctypeDeclHandler = self.callbacks.doctype
+        parser.EntityDeclHandler = self.callbacks.entity
+        parser.UnparsedEntityDeclHandler = self.callbacks.entity
+        parser.NotationDeclHandler = self.callbacks.entity
+        parser.ExternalEntityRefHandler = self.callbacks.external_entity
+        self.parser = parser
+
+    def feed(self, chunk: bytes) -> None:
+        """Screen and parse the next ``chunk`` (at most a few MiB at a time).
+
+        Raises
+        ------
+        XmlLimitExceeded
+            If the document passes a limit.
+        InvalidNetwork
+            If it is malformed, declares a DOCTYPE or entity, nests too
+            deeply or has the wrong root.
+        """
+        self.bytes.feed(chunk)
+        self._parse(chunk, final=False)
+        self.fed += len(chunk)
+        if self.fed - self.parser.CurrentByteIndex > MAX_MARKUP_BYTES:
+            raise markup_too_long()
+
+    def close(self) -> None:
+        """Finish the document: it must be complete and hold a root element."""
+        self._parse(b"", final=True)
+        if self.callbacks.root is None:
+            raise InvalidNetwork("the file holds no XML element")
+
+    def _parse(self, chunk: bytes, *, final: bool) -> None:
+        try:
+            self.parser.Parse(chunk, final)
+        except expat.ExpatError as exc:
+            raise InvalidNetwork(f"malformed XML: {exc}") from None
+
+
+def check_net_xml(xml: bytes | bytearray) -> None:
+    """Raise unless ``xml`` is a safe, well-formed ``<net>`` document within the limits.
+
+    Parameters
+    ----------
+    xml : bytes or bytearray
+        Plain (not compressed) XML.
+
+    Raises
+    ------
+    XmlLimitExceeded, InvalidNetwork
+        As :meth:`XmlScreen.feed` and :meth:`XmlScreen.close`.
+    """
+    screen = XmlScreen(root="net")
+    for piece in _pieces(xml):
+        screen.feed(piece)
+    screen.close()
+
+
+def check_xml_file(path: Path, *, root: str) -> None:
+    """Stream an XML file (plain or gzip) from disk through :class:`XmlScreen`.
+
+    Parameters
+    ----------
+    path : Path
+        The file; gzip content is recognised by its magic bytes.
+    root : str
+        The name its root element must have.
+    """
+    screen = XmlScreen(root=root)
+    for chunk in plain_xml_chunks(path):
+        screen.feed(chunk)
+    screen.close()
 
 
 def check_net_xml_file(path: Path) -> None:
@@ -197,18 +303,15 @@ def check_net_xml_file(path: Path) -> None:
     path : Path
         The network file; gzip content is recognised by its magic bytes.
     """
-    parser, screen = _new_parser()
-    for chunk in plain_xml_chunks(path):
-        _finish(parser, screen, chunk, final=False)
-    _finish(parser, screen, b"", final=True)
+    check_xml_file(path, root="net")
 
 
-def plain_xml_chunks(source: Path | bytes) -> Iterator[bytes]:
+def plain_xml_chunks(source: Path | bytes | bytearray) -> Iterator[bytes]:
     """Yield the plain XML of a network file or of its bytes, a chunk at a time.
 
     Parameters
     ----------
-    source : Path or bytes
+    source : Path, bytes or bytearray
         A ``.net.xml`` or ``.net.xml.gz`` file, or its content; gzip content is
         recognised by its magic bytes and inflated as it is read.
 
@@ -218,7 +321,8 @@ def plain_xml_chunks(source: Path | bytes) -> Iterator[bytes]:
         If the gzip stream is corrupt or truncated.
     """
     if not isinstance(source, Path):
-        yield from _inflate([source]) if source[:2] == GZIP_MAGIC else [source]
+        pieces = _pieces(source)
+        yield from _inflate(pieces) if source[:2] == GZIP_MAGIC else pieces
         return
     with source.open("rb") as raw:
         gzipped = raw.read(2) == GZIP_MAGIC

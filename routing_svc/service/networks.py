@@ -178,7 +178,7 @@ class NetworkRegistry:
         and the plain file) and path."""
         if not data:
             raise InvalidNetwork("empty upload: send the bytes of a .net.xml or .net.xml.gz")
-        xml = read_net_bytes(data, max_bytes=self.max_bytes)  # type: ignore[arg-type]
+        xml = read_net_bytes(data, max_bytes=self.max_bytes)
         digest = network_sha256(xml)
         self.data_dir.mkdir(parents=True, exist_ok=True)
         path = self.data_dir / f"{digest}.net.xml"

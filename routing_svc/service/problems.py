@@ -57,7 +57,7 @@ def install_problem_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(errors.RoutingSvcError)
     async def domain_error(_: Request, exc: errors.RoutingSvcError) -> JSONResponse:
-        return problem(status_of(exc), exc.title, exc.detail)
+        return problem(status_of(exc), exc.title, exc.detail, **exc.problem_members())
 
     @app.exception_handler(RequestValidationError)
     async def validation_error(_: Request, exc: RequestValidationError) -> JSONResponse:

@@ -9,6 +9,7 @@ connection to it and reads no file.
 
 from __future__ import annotations
 
+import gzip
 import socket
 import time
 import zlib
@@ -17,6 +18,7 @@ from pathlib import Path
 
 import httpx
 
+from routing_svc.network.xml_limits import MAX_ATTRIBUTE_BYTES, MAX_ATTRIBUTES, MAX_TEXT_CHARS
 from tests.reliability.conftest import Server, record_figures, vm_kib
 from tests.reliability.workload import fleet_body
 
@@ -132,3 +134,82 @@ def test_hostile_inputs_are_rejected_fast_and_small(
     listener.close()
     assert not connected, "the server fetched an external entity"
     record_figures("hostile_input", figures, tmp_path)
+
+
+BOLOGNA = Path(__file__).resolve().parents[3] / "shared" / "nets" / "bologna.net.xml.gz"
+LOCATION = b"<location "
+
+
+def bologna_with(insert: bytes, *, into_location: bool = False) -> bytes:
+    """Bologna's network with ``insert`` before its ``<location>`` element (or inside its tag)."""
+    plain = gzip.decompress(BOLOGNA.read_bytes())
+    at = plain.index(LOCATION)
+    if into_location:
+        at += len(LOCATION)
+    return plain[:at] + insert + plain[at:]
+
+
+def location_attributes(total: int) -> bytes:
+    """Extra attributes that give Bologna's ``<location>`` (4 of its own) ``total`` in all."""
+    return b"".join(b'x%d="1" ' % i for i in range(total - 4))
+
+
+def test_xml_limits_hold_against_a_live_server(
+    server: Callable[..., Server], tmp_path: Path
+) -> None:
+    """Issue 23: the four hostile uploads of 40 MiB (and 2 million attributes) and
+    each limit just under (a real network that is accepted) and just over (422
+    naming the limit), plain and gzip, each within 100 MiB of extra peak memory."""
+    value_tag = b'<edge id="e" shape="' + b"a" * (40 * MiB) + b'"/>'
+    crowded = b"<edge " + b" ".join(b'a%d="1"' % i for i in range(2_000_000)) + b"/>"
+    hostile: dict[str, tuple[bytes, str]] = {
+        "junk_40MiB": (b"<" * (40 * MiB), "Invalid network"),
+        "attribute_value_40MiB": (b"<net>" + value_tag + b"</net>", "MAX_ATTRIBUTE_BYTES"),
+        "text_40MiB": (b"<net><edge>" + b"t" * (40 * MiB) + b"</edge></net>", "MAX_TEXT_CHARS"),
+        "attributes_2M": (b"<net>" + crowded + b"</net>", "MAX_ATTRIBUTES"),
+    }
+    pad = b"<pad>%s</pad>"
+    for limit, name, make in (
+        (MAX_ATTRIBUTE_BYTES, "MAX_ATTRIBUTE_BYTES", lambda n: b'pad="' + b"1" * n + b'" '),
+        (MAX_ATTRIBUTES, "MAX_ATTRIBUTES", location_attributes),
+        (MAX_TEXT_CHARS, "MAX_TEXT_CHARS", lambda n: pad % (b"t" * n)),
+    ):
+        into = name != "MAX_TEXT_CHARS"
+        hostile[f"{name}_under"] = (bologna_with(make(limit), into_location=into), "")
+        hostile[f"{name}_over"] = (bologna_with(make(limit + 1), into_location=into), name)
+    live = server()
+    assert live.process is not None
+    pid = live.process.pid
+    hwm0 = vm_kib(pid, "VmHWM")
+    figures: dict[str, object] = {"hwm_start_mib": round(hwm0 / 1024, 1)}
+    with httpx.Client(base_url=live.url, timeout=60) as http:
+        for case, (document, expected) in hostile.items():
+            for form in ("plain", "gzip"):
+                body = gzip.compress(document, compresslevel=6) if form == "gzip" else document
+                t0 = time.monotonic()
+                name = f"{case}-{form}".lower().replace("_", "-")
+                r = http.post("/v1/networks", params={"name": name}, content=body)
+                elapsed = time.monotonic() - t0
+                growth = (vm_kib(pid, "VmHWM") - hwm0) / 1024
+                figures[name] = {"status": r.status_code, "s": round(elapsed, 3)}
+                if not expected:
+                    assert r.status_code == 201, (name, r.text[:300])
+                else:
+                    assert r.status_code == 422, (name, r.status_code, r.text[:300])
+                    problem = r.json()
+                    assert r.headers["content-type"].startswith("application/problem+json")
+                    if expected.startswith("MAX_"):
+                        assert problem["title"] == "XML limit exceeded", (name, problem)
+                        assert problem["limit"] == expected, (name, problem)
+                        assert str(problem["maximum"]) in problem["detail"], (name, problem)
+                    else:
+                        assert problem["title"] == expected, (name, problem)
+                assert growth < 100, (name, growth)
+        accepted = {n["id"] for n in http.get("/v1/networks").json()["items"]}
+    figures["hwm_growth_mib"] = round((vm_kib(pid, "VmHWM") - hwm0) / 1024, 1)
+    assert accepted == {"drt"} | {
+        f"{name}-under-{form}".lower().replace("_", "-")
+        for name in ("MAX_ATTRIBUTE_BYTES", "MAX_ATTRIBUTES", "MAX_TEXT_CHARS")
+        for form in ("plain", "gzip")
+    }
+    record_figures("xml_limits", figures, tmp_path)

@@ -140,7 +140,8 @@ BOMB = b"""<?xml version="1.0"?>
         (XXE, 422),
         (BOMB, 422),
         (b"<net>" + b"<a>" * 10000 + b"</a>" * 10000 + b"</net>", 422),
-        (gzip.compress(b"<net>" + b" " * (80 * 1024 * 1024) + b"</net>"), 413),
+        (gzip.compress(b"<net>" + b"<a/>" * (80 * 1024 * 1024) + b"</net>"), 422),  # elements
+        (gzip.compress(b"<net>" + (b"<a/>" + b" " * 12) * (5 * 1024 * 1024) + b"</net>"), 413),
         (b"x" * (70 * 1024 * 1024), 413),
     ],
 )
