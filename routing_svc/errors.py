@@ -16,7 +16,10 @@
     │   └── XmlLimitExceeded    XML past one of the screen's limits (names the limit)
     ├── Conflict                an id that already exists, an idempotency key reused for other input
     ├── PayloadTooLarge         a body or a decompressed file beyond the configured limit
-    ├── StorageError            the store refused to work (e.g. unsafe durability settings)
+    ├── StorageError            the store refused or failed to work (unsafe durability
+    │   │                       settings, unreachable, full, a driver error)
+    │   ├── StorageTimeout      a wait on the store passed its bound; nothing was written
+    │   └── CommitOutcomeUnknown  a write may or may not have committed
     └── ReplayMismatch          a replay of the event log disagrees with the stored state
 
 Every layer raises these; the service maps each class to one HTTP status in one place.
@@ -113,6 +116,18 @@ class PayloadTooLarge(RoutingSvcError):
 
 class StorageError(RoutingSvcError):
     title = "Storage error"
+
+
+class StorageTimeout(StorageError):
+    title = "Storage timeout"
+
+
+class CommitOutcomeUnknown(StorageError):
+    """The connection was lost, or the request's deadline passed, while a write was
+    being committed: it may have been. A retry with the same ``Idempotency-Key``
+    settles it (applied once, or answered from the log)."""
+
+    title = "Commit outcome unknown"
 
 
 class ReplayMismatch(RoutingSvcError):

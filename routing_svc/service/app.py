@@ -17,6 +17,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 from routing_svc import __version__
 from routing_svc.errors import Conflict, StorageError
 from routing_svc.network.identity import file_bytes_sha256
+from routing_svc.service.deadline import RequestDeadline
 from routing_svc.service.demo import ensure_demo_fleet, feed_demo_targets
 from routing_svc.service.fastpath import TARGET_PATH, TargetFastPath
 from routing_svc.service.fleets import FleetService
@@ -25,6 +26,7 @@ from routing_svc.service.networks import NetworkEntry, NetworkRegistry
 from routing_svc.service.problems import install_problem_handlers
 from routing_svc.service.routes import dashboard, fleets, health, networks, stream, targets
 from routing_svc.service.settings import Settings
+from routing_svc.service.store_health import StoreHealth
 from routing_svc.store import EventLog, NetworkRecord
 
 
@@ -131,7 +133,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        log = EventLog(settings.database_url).open()
+        log = EventLog(
+            settings.database_url,
+            busy_timeout_ms=settings.db_busy_timeout_ms,
+            timeouts=settings.store_timeouts(),
+        ).open()
         registry = NetworkRegistry(data_dir=settings.data_dir, max_bytes=settings.max_network_bytes)
         feeder: asyncio.Task[None] | None = None
         service: FleetService | None = None
@@ -143,6 +149,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             app.state.settings = settings
             app.state.networks = registry
             app.state.fleets = service
+            app.state.store_health = StoreHealth(
+                log,
+                timeout_s=settings.health_timeout_s,
+                min_free_bytes=settings.health_min_free_bytes,
+            )
             if settings.demo_fleet and registry.all():
                 ensure_demo_fleet(service, registry.all()[0])
                 if settings.demo_rate > 0:
@@ -180,7 +191,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         dashboard.router,
     ):
         app.include_router(router)
-    app.target_fast_path = settings.target_fast_path  # inside the guards and CORS added below
+    app.target_fast_path = settings.target_fast_path  # inside the middleware added below
+    app.add_middleware(
+        RequestDeadline,
+        timeout_s=settings.request_timeout_s,
+        retry_after_s=settings.retry_after_s,
+    )
     app.add_middleware(
         Guards,
         max_body_bytes=settings.max_body_bytes,

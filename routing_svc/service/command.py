@@ -47,7 +47,42 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--no-demo", action="store_true", help="do not create the demo fleet")
     p.add_argument("--demo-rate", type=float, default=1.0, help="demo targets per second (0: off)")
     p.add_argument("--log-level", default="info")
+    bounds = p.add_argument_group(
+        "bounds on waits", "defaults from the settings (environment ROUTING_SVC_<NAME>)"
+    )
+    from routing_svc.service.settings import Settings
+
+    for name in BOUNDS:
+        field = Settings.model_fields[name]
+        bounds.add_argument(
+            "--" + name.replace("_", "-"),
+            type=type(field.default),
+            default=None,
+            metavar="N",
+            help=f"default {field.default}",
+        )
     p.set_defaults(run=run)
+
+
+BOUNDS = (
+    "request_timeout_s",
+    "health_timeout_s",
+    "health_min_free_bytes",
+    "retry_after_s",
+    "db_busy_timeout_ms",
+    "db_connect_timeout_s",
+    "db_pool_timeout_s",
+    "db_statement_timeout_ms",
+    "db_lock_timeout_ms",
+    "db_idle_in_transaction_timeout_ms",
+    "db_lent_timeout_s",
+    "db_keepalives_idle_s",
+    "db_keepalives_interval_s",
+    "db_keepalives_count",
+    "db_tcp_user_timeout_ms",
+)
+"""Settings that ``serve`` takes as options (``--request-timeout-s`` ...); see
+:class:`~routing_svc.service.settings.Settings`."""
 
 
 def settings_env(args: argparse.Namespace) -> dict[str, str]:
@@ -77,6 +112,10 @@ def settings_env(args: argparse.Namespace) -> dict[str, str]:
     }
     if args.api_key:
         env["ROUTING_SVC_API_KEY"] = args.api_key
+    for name in BOUNDS:
+        value = getattr(args, name, None)
+        if value is not None:
+            env[f"ROUTING_SVC_{name.upper()}"] = str(value)
     return env
 
 
@@ -110,6 +149,23 @@ def run(args: argparse.Namespace) -> int:
         port=args.port,
         workers=args.workers,
         log_level=args.log_level,
+        log_config=log_config(),
         factory=False,
     )
     return 0
+
+
+def log_config() -> dict[str, Any]:
+    """uvicorn's logging configuration, with the service's loggers (``routing_svc.*``, e.g.
+    the causes of 5xx answers under their error ids) on its default handler."""
+    import copy
+
+    from uvicorn.config import LOGGING_CONFIG
+
+    config: dict[str, Any] = copy.deepcopy(LOGGING_CONFIG)
+    config["loggers"]["routing_svc"] = {
+        "handlers": ["default"],
+        "level": "INFO",
+        "propagate": False,
+    }
+    return config

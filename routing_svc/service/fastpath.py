@@ -17,8 +17,9 @@ invalid body or header, a fleet that must first be read from the database,
 or an error raised before anything was queued. The route then answers as it
 always does (the same problem+json), and nothing was applied twice because
 nothing was applied yet. Domain errors that come back from the writer (an
-unreachable target, an idempotency key reused with another body) are answered
-here with the route's problem+json; the writer applied nothing for them.
+unreachable target, an idempotency key reused with another body, a store
+failure or the request's deadline) are answered here with the route's
+problem+json (:func:`~routing_svc.service.problems.error_problem`).
 The route stays registered, so the OpenAPI document describes this path.
 """
 
@@ -32,9 +33,10 @@ from pydantic import ValidationError
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from routing_svc.errors import RoutingSvcError
+from routing_svc.service.deadline import request_deadline
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.guards import replaying
-from routing_svc.service.problems import problem, status_of
+from routing_svc.service.problems import error_problem, retry_after_of
 from routing_svc.service.routes.targets import TARGETS_APPLIED, submit_target
 from routing_svc.service.schemas import TargetSpec
 
@@ -83,14 +85,14 @@ class TargetFastPath:
             return
         try:
             loop = asyncio.get_running_loop()
-            queued = asyncio.wrap_future(submit_target(service, match.group(1), target, key, loop))
+            queued = submit_target(service, match.group(1), target, key, loop)
         except RoutingSvcError:  # raised before anything was queued: the route answers
             await self.app(scope, replay, send)
             return
         try:
-            results, _ = await queued
+            results, _ = await service.settled(queued, deadline=request_deadline())
         except RoutingSvcError as error:
-            response = problem(status_of(error), error.title, error.detail)
+            response = error_problem(error, retry_after=retry_after_of(scope["app"]))
             await response(scope, replay, send)
             FAST_PATH_ANSWERS.inc()
             return

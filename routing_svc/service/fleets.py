@@ -50,9 +50,11 @@ from typing import Any
 from prometheus_client import Counter, Histogram
 
 from routing_svc.errors import (
+    CommitOutcomeUnknown,
     Conflict,
     RoutingSvcError,
     StorageError,
+    StorageTimeout,
     UnknownFleet,
     UnknownNetwork,
 )
@@ -396,6 +398,57 @@ class FleetService:
         if self._committer is not None:
             self._committer.close()
 
+    async def settled(self, future: Outcome, *, deadline: float | None) -> Answer:
+        """Wait for the answer of a request :meth:`submit` queued, until ``deadline``.
+
+        Parameters
+        ----------
+        future
+            What :meth:`submit` returned.
+        deadline
+            Event-loop time; ``None``: wait as long as it takes.
+
+        Raises
+        ------
+        StorageTimeout
+            The deadline passed before a writer took the request: it was withdrawn
+            and will never be written.
+        CommitOutcomeUnknown
+            The deadline passed while its transaction ran: it may commit. A retry
+            with the same idempotency key settles it.
+        """
+        waiter = future if isinstance(future, asyncio.Future) else asyncio.wrap_future(future)
+        if deadline is None:
+            return await waiter
+        bound = asyncio.timeout_at(deadline)
+        try:
+            async with bound:
+                return await waiter
+        except TimeoutError:
+            if not bound.expired():
+                raise
+        if self.withdraw(future):
+            raise StorageTimeout("a write waited for the store past its deadline; withdrawn")
+        raise CommitOutcomeUnknown("a write's deadline passed while its transaction ran")
+
+    def withdraw(self, future: Outcome) -> bool:
+        """Take back a queued request that no writer has taken yet.
+
+        Returns
+        -------
+        bool
+            ``True``: it was still queued and will never be written; ``False``: a
+            writer has it (or answered it already). Called on the event loop's thread.
+        """
+        with self._queue_cond:
+            for queue in (self._queue, self._loop_queue):
+                for pending in queue:
+                    if pending.future is future:
+                        queue.remove(pending)
+                        pending.settled = True
+                        return True
+        return False
+
     async def drain(self) -> None:
         """Wait until the event loop's writer has committed everything queued to it (its
         errors went to the requests' futures)."""
@@ -520,6 +573,13 @@ class FleetService:
                     return False
             try:
                 results = self.log.append_groups([job.request() for job in jobs])
+            except CommitOutcomeUnknown as exc:
+                # it may have committed: trying again fleet by fleet could apply
+                # requests without a key twice; a keyed retry settles each one
+                for job in jobs:
+                    self._cache.pop(job.fleet_id, None)
+                    _fail_unfinished(job.group, exc)
+                return True
             except BaseException:
                 for job in jobs:
                     self._cache.pop(job.fleet_id, None)

@@ -7,6 +7,8 @@ from pathlib import Path
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from routing_svc.store.engine import StoreTimeouts
+
 
 class Settings(BaseSettings):
     """Everything the service needs to start; nothing is read at import time.
@@ -38,6 +40,24 @@ class Settings(BaseSettings):
         Serve ``POST /v1/fleets/{id}/targets`` from the ASGI layer for valid
         bodies (:mod:`routing_svc.service.fastpath`); off, FastAPI's route serves
         every request. The answers are the same bytes either way.
+    request_timeout_s : float
+        Deadline of a request (all but network uploads and the event stream): past
+        it the answer is a 503 problem with ``Retry-After``.
+    health_timeout_s : float
+        Deadline of ``/healthz``, which then reports the store unreachable.
+    health_min_free_bytes : int
+        ``/healthz`` answers 503 when the file system of a SQLite database has less free.
+    retry_after_s : int
+        The ``Retry-After`` of a 503 caused by the store.
+    db_busy_timeout_ms : int
+        How long a SQLite writer waits for another process's write lock.
+    db_connect_timeout_s, db_pool_timeout_s, db_statement_timeout_ms, db_lock_timeout_ms,
+    db_idle_in_transaction_timeout_ms, db_lent_timeout_s, db_keepalives_idle_s,
+    db_keepalives_interval_s, db_keepalives_count, db_tcp_user_timeout_ms
+        Bounds on the waits on the database, see
+        :class:`~routing_svc.store.engine.StoreTimeouts` (PostgreSQL; the pool's
+        timeout applies to SQLite too). ``db_lent_timeout_s`` <= 0 turns the
+        client-side bound off.
     """
 
     model_config = SettingsConfigDict(
@@ -58,3 +78,33 @@ class Settings(BaseSettings):
     demo_rate: float = 0.0
     recent_window: int = 200
     target_fast_path: bool = True
+    request_timeout_s: float = Field(default=30.0, gt=0)
+    health_timeout_s: float = Field(default=2.0, gt=0)
+    health_min_free_bytes: int = Field(default=64 * 1024 * 1024, ge=0)
+    retry_after_s: int = Field(default=2, ge=0)
+    db_busy_timeout_ms: int = Field(default=30_000, ge=0)
+    db_connect_timeout_s: int = Field(default=5, ge=2)
+    db_pool_timeout_s: float = Field(default=5.0, gt=0)
+    db_statement_timeout_ms: int = Field(default=5_000, ge=0)
+    db_lock_timeout_ms: int = Field(default=5_000, ge=0)
+    db_idle_in_transaction_timeout_ms: int = Field(default=10_000, ge=0)
+    db_lent_timeout_s: float = 10.0
+    db_keepalives_idle_s: int = Field(default=10, ge=1)
+    db_keepalives_interval_s: int = Field(default=3, ge=1)
+    db_keepalives_count: int = Field(default=3, ge=1)
+    db_tcp_user_timeout_ms: int = Field(default=10_000, ge=0)
+
+    def store_timeouts(self) -> StoreTimeouts:
+        """The ``db_*`` bounds as the store takes them."""
+        return StoreTimeouts(
+            connect_s=self.db_connect_timeout_s,
+            pool_checkout_s=self.db_pool_timeout_s,
+            statement_ms=self.db_statement_timeout_ms,
+            lock_ms=self.db_lock_timeout_ms,
+            idle_in_transaction_ms=self.db_idle_in_transaction_timeout_ms,
+            lent_s=self.db_lent_timeout_s if self.db_lent_timeout_s > 0 else None,
+            keepalives_idle_s=self.db_keepalives_idle_s,
+            keepalives_interval_s=self.db_keepalives_interval_s,
+            keepalives_count=self.db_keepalives_count,
+            tcp_user_timeout_ms=self.db_tcp_user_timeout_ms,
+        )

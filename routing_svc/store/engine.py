@@ -18,6 +18,15 @@ Two backends share one schema:
   ``synchronous_commit`` or ``full_page_writes`` is off: acknowledged events
   must survive a crash.
 
+:class:`StoreTimeouts` bounds every wait on the database: the connect
+timeout, TCP keepalives and ``tcp_user_timeout`` (libpq), the server's
+``statement_timeout``, ``lock_timeout`` and
+``idle_in_transaction_session_timeout`` (sent in the connection's start-up
+``options``; options in the URL win), the pool's checkout timeout, and a
+client-side bound on each lent-out connection
+(:mod:`routing_svc.store.watchdog`), which also covers the liveness ping the
+pool runs before lending a connection out.
+
 :func:`upgrade` runs the Alembic migrations that live inside the package.
 """
 
@@ -27,6 +36,7 @@ import sqlite3
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -36,13 +46,17 @@ from alembic.config import Config
 from sqlalchemy import event
 from sqlalchemy.engine import Connection, Engine, make_url
 
-from routing_svc.errors import Conflict, StorageError
+from routing_svc.errors import CommitOutcomeUnknown, Conflict, StorageError, StorageTimeout
+from routing_svc.store.watchdog import ConnectionWatchdog
 
 __all__ = [
     "BEGIN_MODE",
     "MIGRATIONS_DIR",
+    "StoreTimeouts",
     "check_durability",
+    "commit",
     "create_store_engine",
+    "fault_reason",
     "is_sqlite_busy",
     "storage_errors",
     "upgrade",
@@ -60,7 +74,67 @@ _SQLITE_BEGIN = {mode: f"BEGIN {mode}" for mode in ("IMMEDIATE", "DEFERRED", "EX
 """The statement that begins a transaction in each BEGIN mode."""
 
 
-def create_store_engine(url: str, *, busy_timeout_ms: int) -> Engine:
+@dataclass(frozen=True, slots=True)
+class StoreTimeouts:
+    """Bounds on the store's waits on its database (PostgreSQL unless said).
+
+    Attributes
+    ----------
+    connect_s
+        libpq ``connect_timeout``: the whole connection set-up (libpq's minimum is 2).
+    pool_checkout_s
+        How long a caller waits for a free connection of the pool (both backends).
+    statement_ms, lock_ms
+        The server's ``statement_timeout`` and ``lock_timeout``, for every statement.
+    idle_in_transaction_ms
+        The server's ``idle_in_transaction_session_timeout``: a client that vanished
+        inside a transaction loses its session, and its row locks, after this long.
+    lent_s
+        Client-side bound on a connection lent out by the pool, from the liveness
+        ping to its return (:mod:`routing_svc.store.watchdog`); ``None``: unbounded.
+    keepalives_idle_s, keepalives_interval_s, keepalives_count
+        TCP keepalives (libpq ``keepalives_*``): a silent peer is noticed after about
+        ``idle + interval * count`` seconds.
+    tcp_user_timeout_ms
+        libpq ``tcp_user_timeout``: sent data left unacknowledged this long errors
+        the socket out.
+    """
+
+    connect_s: int = 5
+    pool_checkout_s: float = 5.0
+    statement_ms: int = 5_000
+    lock_ms: int = 5_000
+    idle_in_transaction_ms: int = 10_000
+    lent_s: float | None = 10.0
+    keepalives_idle_s: int = 10
+    keepalives_interval_s: int = 3
+    keepalives_count: int = 3
+    tcp_user_timeout_ms: int = 10_000
+
+    def libpq_parameters(self) -> dict[str, str]:
+        """The libpq connection parameters these bounds set."""
+        options = (
+            f"-c statement_timeout={int(self.statement_ms)} -c lock_timeout={int(self.lock_ms)} "
+            f"-c idle_in_transaction_session_timeout={int(self.idle_in_transaction_ms)}"
+        )
+        return {
+            "connect_timeout": str(int(self.connect_s)),
+            "keepalives": "1",
+            "keepalives_idle": str(int(self.keepalives_idle_s)),
+            "keepalives_interval": str(int(self.keepalives_interval_s)),
+            "keepalives_count": str(int(self.keepalives_count)),
+            "tcp_user_timeout": str(int(self.tcp_user_timeout_ms)),
+            "options": options,
+        }
+
+
+def create_store_engine(
+    url: str,
+    *,
+    busy_timeout_ms: int,
+    timeouts: StoreTimeouts | None = None,
+    watchdog: ConnectionWatchdog | None = None,
+) -> Engine:
     """Create (without connecting) an engine for a supported database URL.
 
     Parameters
@@ -69,6 +143,11 @@ def create_store_engine(url: str, *, busy_timeout_ms: int) -> Engine:
         ``sqlite:///path/to/file.db`` or ``postgresql+psycopg://user@host/db``.
     busy_timeout_ms
         How long a SQLite connection waits for the write lock.
+    timeouts
+        Bounds on the waits (see :class:`StoreTimeouts`); ``None``: the drivers'
+        defaults (a tool that reads a whole log, such as ``routing-svc replay``).
+    watchdog
+        Enforces ``timeouts.lent_s`` on PostgreSQL (the caller stops it).
 
     Returns
     -------
@@ -82,17 +161,75 @@ def create_store_engine(url: str, *, busy_timeout_ms: int) -> Engine:
     """
     parsed = make_url(url)
     backend = parsed.get_backend_name()
+    pool: dict[str, Any] = {}
+    if timeouts is not None:
+        pool["pool_timeout"] = timeouts.pool_checkout_s
     if backend == "sqlite":
-        engine = sa.create_engine(parsed)
+        engine = sa.create_engine(parsed, **pool)
         _install_sqlite_hooks(engine, busy_timeout_ms=busy_timeout_ms)
         return engine
     if backend == "postgresql":
         if parsed.drivername == "postgresql":
             parsed = parsed.set(drivername="postgresql+psycopg")
-        return sa.create_engine(parsed, pool_pre_ping=True)
+        if timeouts is None:
+            return sa.create_engine(parsed, pool_pre_ping=True)
+        query = dict(parsed.query)
+        for name, value in timeouts.libpq_parameters().items():
+            given = query.get(name)
+            if name == "options" and isinstance(given, str):
+                query[name] = f"{value} {given}"  # the URL's options come last and win
+            elif given is None:
+                query[name] = value
+        engine = sa.create_engine(parsed.set(query=query), **pool)
+        _install_pg_checkout_bound(engine, timeouts, watchdog or ConnectionWatchdog())
+        return engine
     raise StorageError(
         f"unsupported database URL {parsed!r}: use sqlite:/// or postgresql+psycopg://"
     )
+
+
+def _install_pg_checkout_bound(
+    engine: Engine, timeouts: StoreTimeouts, watchdog: ConnectionWatchdog
+) -> None:
+    """Ping each connection the pool lends out, both bounded by ``watchdog``.
+
+    This replaces ``pool_pre_ping``, whose ping runs before any checkout hook and
+    so could wait forever on a connection whose peer stopped answering.
+    """
+    ping_bound = float(timeouts.connect_s)
+    lent_bound = timeouts.lent_s
+    dialect = engine.dialect
+
+    @event.listens_for(engine, "connect")
+    def _on_connect(_dbapi_connection: Any, record: Any) -> None:
+        record.info["routing_svc_fresh"] = True
+
+    @event.listens_for(engine, "checkout")
+    def _on_checkout(dbapi_connection: Any, record: Any, _proxy: Any) -> None:
+        if not record.info.pop("routing_svc_fresh", False):
+            watchdog.watch(record, dbapi_connection, ping_bound)
+            try:
+                dialect.do_ping(dbapi_connection)
+            except Exception as error:
+                watchdog.release(record)
+                # the pool drops this connection (and older ones) and connects anew
+                raise sa.exc.DisconnectionError(str(error)) from error
+        if lent_bound is not None:
+            watchdog.watch(record, dbapi_connection, lent_bound)
+        else:
+            watchdog.release(record)
+
+    @event.listens_for(engine, "checkin")
+    def _on_checkin(_dbapi_connection: Any, record: Any) -> None:
+        watchdog.release(record)
+
+    @event.listens_for(engine, "invalidate")
+    def _on_invalidate(_dbapi_connection: Any, record: Any, _error: Any) -> None:
+        watchdog.release(record)
+
+    @event.listens_for(engine, "close")
+    def _on_close(_dbapi_connection: Any, record: Any) -> None:
+        watchdog.release(record)
 
 
 def _install_sqlite_hooks(engine: Engine, *, busy_timeout_ms: int) -> None:
@@ -214,6 +351,58 @@ def is_sqlite_busy(error: StorageError) -> bool:
     return isinstance(orig, sqlite3.OperationalError) and (
         "locked" in str(orig) or "busy" in str(orig)
     )
+
+
+_FAULTS = {
+    "full": "the store is out of space",
+    "unreachable": "the store is unreachable",
+    "timeout": "the store did not answer in time",
+    "failed": "the store reported an error",
+}
+_PG_FULL = "53100"  # disk_full
+_PG_TIMEOUTS = ("57014", "55P03")  # query_canceled (statement_timeout), lock_not_available
+
+
+def fault_reason(error: StorageError) -> str:
+    """A short public description of a storage failure (no host, driver or SQL)."""
+    if isinstance(error, StorageTimeout):
+        return _FAULTS["timeout"]
+    if isinstance(error, CommitOutcomeUnknown):
+        return _FAULTS["unreachable"]
+    cause = error.__cause__
+    orig = getattr(cause, "orig", cause)
+    text = str(orig).lower()
+    if isinstance(orig, sqlite3.Error) and ("full" in text or "no space" in text):
+        return _FAULTS["full"]
+    sqlstate = getattr(orig, "sqlstate", None)
+    if sqlstate == _PG_FULL:
+        return _FAULTS["full"]
+    if sqlstate in _PG_TIMEOUTS or isinstance(cause, sa.exc.TimeoutError):
+        return _FAULTS["timeout"]
+    if (
+        isinstance(cause, sa.exc.DBAPIError)
+        and (cause.connection_invalidated or isinstance(orig, OSError) or sqlstate is None)
+        and not isinstance(orig, sqlite3.Error)
+    ):
+        return _FAULTS["unreachable"]
+    return _FAULTS["failed"]
+
+
+def commit(transaction: sa.engine.Transaction, what: str) -> None:
+    """Commit ``transaction``; a PostgreSQL connection lost at the commit raises
+    :class:`CommitOutcomeUnknown` (the server may have committed before it went).
+
+    On SQLite a failed ``COMMIT`` leaves nothing committed, so its error stays a
+    plain driver error (made a :class:`StorageError` by :func:`storage_errors`).
+    """
+    try:
+        transaction.commit()
+    except sa.exc.DBAPIError as error:
+        if error.connection_invalidated and transaction.connection.dialect.name != "sqlite":
+            raise CommitOutcomeUnknown(
+                f"connection lost at the commit of {what}: {error}"
+            ) from error
+        raise
 
 
 @contextmanager

@@ -19,9 +19,10 @@ fleet cannot mistake a new fleet for it.
 
 from __future__ import annotations
 
+import os
 import threading
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager, nullcontext
+from contextlib import contextmanager, nullcontext, suppress
 from dataclasses import dataclass
 from datetime import datetime
 from types import TracebackType
@@ -41,6 +42,7 @@ from routing_svc.errors import (
 from routing_svc.store import engine as store_engine
 from routing_svc.store import queries as q
 from routing_svc.store.checkpoint import WalCheckpointer
+from routing_svc.store.engine import StoreTimeouts
 from routing_svc.store.records import (
     AppendResult,
     EventRecord,
@@ -49,7 +51,8 @@ from routing_svc.store.records import (
     NetworkRecord,
     NewEvent,
 )
-from routing_svc.store.schema import events, fleets, networks
+from routing_svc.store.schema import events, fleets, networks, store_probe
+from routing_svc.store.watchdog import ConnectionWatchdog
 
 __all__ = [
     "FLEET_CREATED",
@@ -87,6 +90,9 @@ class EventLog:
         ``sqlite:///path/to/file.db`` or ``postgresql+psycopg://user@host/db``.
     busy_timeout_ms
         How long a SQLite writer waits for the write lock before failing.
+    timeouts
+        Bounds on every wait on the database (:class:`~routing_svc.store.engine.StoreTimeouts`);
+        ``None`` (the default, for tools that read whole logs): the drivers' defaults.
 
     Notes
     -----
@@ -96,10 +102,16 @@ class EventLog:
     instance may be shared by threads.
     """
 
-    def __init__(self, url: str, *, busy_timeout_ms: int = 30_000) -> None:
+    def __init__(
+        self, url: str, *, busy_timeout_ms: int = 30_000, timeouts: StoreTimeouts | None = None
+    ) -> None:
         self.url = url
         self.busy_timeout_ms = busy_timeout_ms
+        self.timeouts = timeouts
         self._engine: Engine | None = None
+        self._watchdog: ConnectionWatchdog | None = None
+        self.last_write_error: StorageError | None = None
+        """The storage error of the last write, ``None`` when it committed (or none ran)."""
         # SQLite has one write lock per database: threads of this process queue
         # here instead of in SQLite's busy handler, which sleeps between retries.
         self._sqlite_writer = threading.Lock()
@@ -112,7 +124,13 @@ class EventLog:
         """Connect, refuse unsafe durability settings, migrate; return ``self``."""
         if self._engine is not None:
             return self
-        engine = store_engine.create_store_engine(self.url, busy_timeout_ms=self.busy_timeout_ms)
+        self._watchdog = ConnectionWatchdog() if self.timeouts is not None else None
+        engine = store_engine.create_store_engine(
+            self.url,
+            busy_timeout_ms=self.busy_timeout_ms,
+            timeouts=self.timeouts,
+            watchdog=self._watchdog,
+        )
         try:
             with store_engine.storage_errors("open the event log"):
                 with engine.connect() as connection:
@@ -120,6 +138,7 @@ class EventLog:
                 store_engine.upgrade(engine)
         except BaseException:
             engine.dispose()
+            self._stop_watchdog()
             raise
         self._engine = engine
         database = engine.url.database
@@ -137,6 +156,12 @@ class EventLog:
                 self._drop_impatient_connection()
             self._engine.dispose()
             self._engine = None
+        self._stop_watchdog()
+
+    def _stop_watchdog(self) -> None:
+        if self._watchdog is not None:
+            self._watchdog.stop()
+            self._watchdog = None
 
     def __enter__(self) -> Self:
         return self.open()
@@ -153,6 +178,37 @@ class EventLog:
     def dialect(self) -> str:
         """``"sqlite"`` or ``"postgresql"``."""
         return self._require().dialect.name
+
+    # -- health ----------------------------------------------------------------
+
+    def check_reachable(self) -> None:
+        """Run one trivial read; :class:`StorageError` when the database does not answer."""
+        with self._read("reach the database") as conn:
+            conn.exec_driver_sql("SELECT 1").scalar_one()
+
+    def probe_write(self) -> None:
+        """Commit one tiny write (the ``store_probe`` row) and note its outcome like any
+        other write's; :class:`StorageError` when it fails."""
+        with self._write("write the store probe") as conn:
+            conn.execute(sa.update(store_probe).values(written_at=q.now()))
+
+    def free_bytes(self) -> int | None:
+        """Bytes free on the file system of a SQLite database (``None`` on PostgreSQL)."""
+        engine = self._require()
+        database = engine.url.database
+        if engine.dialect.name != "sqlite" or not database:
+            return None
+        stats = os.statvfs(os.path.dirname(os.path.abspath(database)))
+        return stats.f_bavail * stats.f_frsize
+
+    def connections_in_use(self) -> int:
+        """Connections the pool has lent out and not yet got back."""
+        pool = self._require().pool
+        checked_out = getattr(pool, "checkedout", None)
+        return int(checked_out()) if checked_out is not None else 0
+
+    def _note_write(self, error: StorageError | None) -> None:
+        self.last_write_error = error
 
     # -- networks --------------------------------------------------------------
 
@@ -565,11 +621,28 @@ class EventLog:
 
     @contextmanager
     def _write(self, what: str) -> Iterator[Connection]:
-        """A transaction that holds the write lock (SQLite) until it ends."""
+        """A transaction that holds the write lock (SQLite) until it ends.
+
+        Its outcome is noted in :attr:`last_write_error` (a domain error raised
+        inside, such as :class:`Conflict`, notes nothing); a connection lost at
+        the commit raises :class:`CommitOutcomeUnknown` on PostgreSQL.
+        """
         engine = self._require()
         gate = self._sqlite_writer if engine.dialect.name == "sqlite" else nullcontext()
-        with gate, store_engine.storage_errors(what), engine.begin() as conn:
-            yield conn
+        try:
+            with gate, store_engine.storage_errors(what), engine.connect() as conn:
+                transaction = conn.begin()
+                try:
+                    yield conn
+                except BaseException:
+                    with suppress(sa.exc.SQLAlchemyError):
+                        transaction.rollback()
+                    raise
+                store_engine.commit(transaction, what)
+        except StorageError as error:
+            self._note_write(error)
+            raise
+        self._note_write(None)
 
     @contextmanager
     def _read(self, what: str) -> Iterator[Connection]:
@@ -628,7 +701,7 @@ class UncommittedAppend:
         see :mod:`routing_svc.service.committer`). SQLAlchemy's commit then only ends its
         own transaction: the driver has nothing left to commit.
         """
-        self._end(self._commit_on_driver, f"commit ({self._what})")
+        self._end(self._commit_on_driver, f"commit ({self._what})", committing=True)
 
     def _commit_on_driver(self) -> None:
         conn = self._conn
@@ -639,20 +712,24 @@ class UncommittedAppend:
 
     def rollback(self) -> None:
         """Write nothing."""
-        self._end(self._conn.rollback, f"roll back ({self._what})")
+        self._end(self._conn.rollback, f"roll back ({self._what})", committing=False)
 
-    def _end(self, finish: Callable[[], None], what: str) -> None:
+    def _end(self, finish: Callable[[], None], what: str, *, committing: bool) -> None:
         """End the transaction with ``finish``; give the write lock back in any case and
-        drop the connection if that failed."""
+        drop the connection if that failed. A commit's outcome is noted as a write's."""
         log = self._log
         try:
             with store_engine.storage_errors(what):
                 finish()
-        except BaseException:
+        except BaseException as error:
             log._drop_impatient_connection()
+            if committing and isinstance(error, StorageError):
+                log._note_write(error)
             raise
         finally:
             log._sqlite_writer.release()
+        if committing:
+            log._note_write(None)
 
 
 def _checked_group(
@@ -672,9 +749,11 @@ def _checked_group(
     ]
 
 
-def open_event_log(url: str, *, busy_timeout_ms: int = 30_000) -> EventLog:
+def open_event_log(
+    url: str, *, busy_timeout_ms: int = 30_000, timeouts: StoreTimeouts | None = None
+) -> EventLog:
     """Create an :class:`EventLog` for ``url`` and open it."""
-    return EventLog(url, busy_timeout_ms=busy_timeout_ms).open()
+    return EventLog(url, busy_timeout_ms=busy_timeout_ms, timeouts=timeouts).open()
 
 
 @dataclass(frozen=True, slots=True)

@@ -13,7 +13,16 @@ from __future__ import annotations
 
 import sqlalchemy as sa
 
-__all__ = ["ID_LENGTH", "KEY_LENGTH", "KIND_LENGTH", "events", "fleets", "metadata", "networks"]
+__all__ = [
+    "ID_LENGTH",
+    "KEY_LENGTH",
+    "KIND_LENGTH",
+    "events",
+    "fleets",
+    "metadata",
+    "networks",
+    "store_probe",
+]
 
 ID_LENGTH = 128
 """Longest network or fleet id."""
@@ -72,3 +81,12 @@ events = sa.Table(
     sa.Column("created_at", sa.DateTime(timezone=True), nullable=False),
     sa.UniqueConstraint("fleet_id", "idempotency_key", name="uq_events_fleet_idempotency_key"),
 )
+
+store_probe = sa.Table(
+    "store_probe",
+    metadata,
+    sa.Column("id", sa.Integer(), primary_key=True, autoincrement=False),
+    sa.Column("written_at", sa.DateTime(timezone=True), nullable=True),
+)
+"""One row that ``/healthz`` rewrites to learn whether the store takes writes again
+after a write failed (:meth:`EventLog.probe_write`)."""

@@ -133,7 +133,7 @@ def test_migrations_build_exactly_the_declared_schema(db_url: str) -> None:
     finally:
         engine.dispose()
     assert diff == []
-    assert head == "0001"
+    assert head == "0002"
 
 
 def test_concurrent_opens_migrate_once(db_url: str) -> None:

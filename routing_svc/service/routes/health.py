@@ -1,29 +1,48 @@
-"""Liveness and Prometheus metrics."""
+"""Health (can the store take a write now?) and Prometheus metrics."""
 
 from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Response
+from fastapi import APIRouter, Depends, Request, Response
+from fastapi.responses import JSONResponse
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
-from starlette.concurrency import run_in_threadpool
 
 from routing_svc.service.deps import fleet_service
 from routing_svc.service.fleets import FleetService
+from routing_svc.service.problems import retry_after_of
+from routing_svc.service.store_health import StoreHealth
 
 router = APIRouter(tags=["health"])
 
+HEALTH_RESPONSES: dict[int | str, dict[str, Any]] = {
+    200: {"description": "The store can take writes now."},
+    503: {
+        "description": "Writes would fail now (`reason` says why); `Retry-After` is set.",
+        "content": {"application/json": {"schema": {"type": "object"}}},
+    },
+}
 
-@router.get("/healthz")
-async def healthz(service: Annotated[FleetService, Depends(fleet_service)]) -> dict[str, Any]:
-    """The service is up and its database answers."""
-    fleets = await run_in_threadpool(service.log.list_fleets)
-    return {
-        "status": "ok",
+
+@router.get("/healthz", responses=HEALTH_RESPONSES, response_class=JSONResponse)
+async def healthz(
+    request: Request, service: Annotated[FleetService, Depends(fleet_service)]
+) -> JSONResponse:
+    """200 when the store can take a write now, else 503 with the reason; answered within
+    the health deadline (``health_timeout_s``) even when the database does not answer."""
+    health: StoreHealth = request.app.state.store_health
+    verdict = await health.check()
+    body: dict[str, Any] = {
+        "status": "ok" if verdict.reason is None else "unavailable",
         "database": service.log.dialect,
         "networks": len(service.networks.all()),
-        "fleets": len(fleets),
+        "connections_in_use": verdict.connections_in_use,
     }
+    if verdict.reason is None:
+        return JSONResponse(body)
+    body["reason"] = verdict.reason
+    headers = {"Retry-After": str(retry_after_of(request.app))}
+    return JSONResponse(body, status_code=503, headers=headers)
 
 
 @router.get("/metrics", include_in_schema=False)

@@ -43,7 +43,7 @@ from starlette.concurrency import run_in_threadpool
 from routing_svc.errors import InvalidInput, RoutingSvcError, UnknownFleet
 from routing_svc.service.deps import fleet_service
 from routing_svc.service.fleets import FleetService
-from routing_svc.service.problems import status_of
+from routing_svc.service.problems import error_document
 from routing_svc.store import EventRecord
 
 POLL_SECONDS = 0.25
@@ -97,14 +97,7 @@ def log_message(event: EventRecord) -> str:
 
 def problem_message(error: RoutingSvcError) -> str:
     """A domain error as an ``event: problem`` message (RFC 9457 fields)."""
-    slug = error.title.lower().replace(" ", "-")
-    body = {
-        "type": f"urn:routing-svc:problem:{slug}",
-        "title": error.title,
-        "status": status_of(error),
-        "detail": error.detail,
-    }
-    return sse_message(data=json.dumps(body), event="problem")
+    return sse_message(data=json.dumps(error_document(error)), event="problem")
 
 
 async def metrics_message(service: FleetService, fleet_id: str) -> str | None:

@@ -12,6 +12,7 @@ from prometheus_client import Counter
 from pydantic import ValidationError
 from starlette.concurrency import run_in_threadpool
 
+from routing_svc.service.deadline import request_deadline
 from routing_svc.service.deps import fleet_service
 from routing_svc.service.fleets import FleetService, Outcome
 from routing_svc.service.schemas import TargetBatch, TargetSpec, TravelTimes
@@ -56,7 +57,8 @@ def submit_target(
 
 
 async def _committed(service: FleetService, fleet_id: str, submit: Submit) -> tuple[list[str], int]:
-    """Queue a request (``submit``) and wait for its commit.
+    """Queue a request (``submit``) and wait for its commit, until the request's deadline
+    (:meth:`FleetService.settled`).
 
     The event loop only resolves the positions and queues the request (for
     itself to write) when the fleet is in memory; a fleet that must first be
@@ -67,7 +69,7 @@ async def _committed(service: FleetService, fleet_id: str, submit: Submit) -> tu
         future = submit(asyncio.get_running_loop())
     else:
         future = await run_in_threadpool(submit, None)
-    return await asyncio.wrap_future(future)
+    return await service.settled(future, deadline=request_deadline())
 
 
 @router.post(
