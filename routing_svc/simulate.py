@@ -24,16 +24,15 @@ from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput
 from routing_svc.optimum import expected_cost, solve_pmedian
 from routing_svc.sa import (
+    DEFAULT_RULE,
     Annealing,
     Fleet,
-    FleetConfig,
     Objective,
+    Rule,
     Vehicle,
-    default_probe,
-    default_schedule,
+    learning_config,
     prior_counts,
 )
-from routing_svc.sa.schedules import DEFAULT_PROBE
 
 
 @dataclass(frozen=True)
@@ -114,7 +113,8 @@ def run_simulation(
     checkpoints: int = 20,
     progress: bool = True,
     probe: float | None = None,
-    step_scale: float = 0.5,
+    step_scale: float | None = None,
+    rule: Rule = DEFAULT_RULE,
 ) -> dict[str, Any]:
     """Run the SA on ``targets`` draws and report the exact objective over time.
 
@@ -125,9 +125,10 @@ def run_simulation(
     the SA then refines"). Targets used to start count toward ``targets``,
     and toward each vehicle's step counter (the prior targets it serves), so
     that the SA goes on with the steps of a fleet that has seen them.
-    ``probe`` is the window of the backward finite difference as a fraction
-    of the cell radius ``R`` (:attr:`FleetConfig.probe`, network only);
-    ``step_scale`` is ``a / R`` of the step schedule.
+    ``rule`` is the learning rule (:func:`routing_svc.sa.learning_config`);
+    ``probe`` the window of the ``probe`` rule's backward finite difference as a
+    fraction of the cell radius ``R``; ``step_scale`` is ``a / R`` of the step
+    schedule (default: the rule's).
     """
     from tqdm import tqdm
 
@@ -136,19 +137,15 @@ def run_simulation(
     n = len(scenario.starts)
     stream = scenario.demand.sample(rng, targets)
     starts, used = starting_positions(scenario, stream, start=start, power=objective.power)
-    config = FleetConfig(
+    config = learning_config(
+        rule,
+        typical_cost=space.typical_cost(),
+        n_vehicles=n,
         objective=objective,
-        schedule=default_schedule(
-            typical_cost=space.typical_cost(),
-            n_vehicles=n,
-            power=objective.power,
-            scale=step_scale,
-        ),
-        annealing=annealing,
         seed=seed,
-        probe=None
-        if probe is None
-        else default_probe(typical_cost=space.typical_cost(), n_vehicles=n, fraction=probe),
+        annealing=annealing,
+        probe=probe,
+        step_scale=step_scale,
         prior_counts=prior_counts(space, starts, [1.0] * n, stream[:used])
         if start.startswith("prior")
         else (),
@@ -171,6 +168,7 @@ def run_simulation(
     optimum_seconds = time.perf_counter() - started
     marks = sorted({round(x) for x in np.linspace(used, targets, checkpoints + 1)})
     curve = [{"targets": used, "expected_cost": value()}]
+    consolidations = {"made": 0, "accepted": 0}
     sa_seconds = 0.0
     first_target_seconds = None
     done = used
@@ -186,7 +184,10 @@ def run_simulation(
                 batch = batch[1:]
             t0 = time.perf_counter()
             for z in batch:
-                fleet.observe(z)
+                made = fleet.observe(z).consolidation
+                if made is not None:
+                    consolidations["made"] += 1
+                    consolidations["accepted"] += made.accepted
             sa_seconds += time.perf_counter() - t0
             bar.update(mark - done)
             done = mark
@@ -199,6 +200,8 @@ def run_simulation(
         "annealing": None if annealing is None else annealing.to_dict(),
         "seed": seed,
         "start": start,
+        "rule": config.rule.value,
+        "consolidations": consolidations,
         "probe": config.probe,
         "step": config.schedule.to_dict(),
         "demand": {"name": scenario.demand.name, "atoms": len(scenario.demand.positions)},
@@ -285,18 +288,26 @@ def add_parser(sub: Any) -> None:
         "(p-median of the first N targets; default prior:3000)",
     )
     p.add_argument(
+        "--rule",
+        choices=[r.value for r in Rule],
+        default=DEFAULT_RULE.value,
+        help="learning rule: consolidating (default: held steps and consolidations), "
+        "probe (the paper's step and the backward probe) or paper (eq. (10) alone)",
+    )
+    p.add_argument(
         "--probe",
         type=float,
-        default=DEFAULT_PROBE,
+        default=None,
         metavar="FRACTION",
-        help="window of the backward finite difference that sees the jumps of J on a "
-        "directed network, as a fraction of the cell radius R (default 0.05; 0: off)",
+        help="the probe rule's window of the backward finite difference, as a fraction "
+        "of the cell radius R (default 0.05)",
     )
     p.add_argument(
         "--step-scale",
         type=float,
-        default=0.5,
-        help="first step a = step_scale * R of the default schedule (default 0.5)",
+        default=None,
+        help="first step a = step_scale * R of the default schedule "
+        "(default 0.01 for consolidating, 0.5 otherwise)",
     )
     p.add_argument(
         "--checkpoints",
@@ -311,10 +322,17 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.vehicles < 1 or args.targets < 0 or args.checkpoints < 1:
         raise InvalidInput("--vehicles and --checkpoints must be >= 1, --targets >= 0")
-    if not (math.isfinite(args.probe) and args.probe >= 0.0):
+    if args.probe is not None and not (math.isfinite(args.probe) and args.probe >= 0.0):
         raise InvalidInput("--probe must be a fraction >= 0 (0: the paper's rule alone)")
-    if not (math.isfinite(args.step_scale) and args.step_scale > 0.0):
+    if args.step_scale is not None and not (
+        math.isfinite(args.step_scale) and args.step_scale > 0.0
+    ):
         raise InvalidInput("--step-scale must be a number > 0")
+    rule = Rule(args.rule)
+    if args.probe is not None and rule is not Rule.PROBE:
+        raise InvalidInput("--probe goes with --rule probe")
+    if args.plane and rule is Rule.PROBE:
+        raise InvalidInput("the probe rule needs a road network, not --plane")
     rng = np.random.default_rng(args.seed)
     if args.plane:
         scenario = plane_scenario(demand=args.demand, vehicles=args.vehicles, rng=rng)
@@ -334,8 +352,9 @@ def run(args: argparse.Namespace) -> int:
         start=args.start,
         checkpoints=args.checkpoints,
         progress=not args.quiet,
-        probe=args.probe if args.probe > 0 and not args.plane else None,
+        probe=args.probe,
         step_scale=args.step_scale,
+        rule=rule,
     )
     print(json.dumps(report, indent=2))
     return 0

@@ -14,7 +14,7 @@ Two methods:
 
 - ``"heuristic"``: greedy addition and Whitaker's fast interchange to a local
   optimum, then a variable neighbourhood search from it
-  (:mod:`routing_svc.optimum.interchange`).
+  (:mod:`routing_svc.sa.interchange`).
 - ``"milp"``: exact. Greedy addition and the fast interchange give an
   incumbent; a Lagrangian bound (:mod:`routing_svc.optimum.lagrangian`) often
   proves it optimal at once, and otherwise drops the sites that cannot be in
@@ -51,8 +51,8 @@ import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint, milp
 
 from routing_svc.errors import InvalidInput
-from routing_svc.optimum.interchange import greedy_interchange, neighbourhood_search
 from routing_svc.optimum.lagrangian import lagrangian_bound
+from routing_svc.sa.interchange import greedy_interchange, neighbourhood_search
 from routing_svc.types import BoolArray, FloatArray, IntArray
 
 Method = Literal["auto", "milp", "heuristic"]

@@ -1,15 +1,18 @@
 """The pure stochastic-approximation core: no I/O, no network imports."""
 
 from routing_svc.sa.annealing import Annealing
+from routing_svc.sa.consolidation import Consolidation, ConsolidationPolicy
 from routing_svc.sa.fleet import (
     Dispatch,
     Fleet,
     FleetConfig,
     FleetState,
     Outcome,
+    Rule,
     Vehicle,
     prior_counts,
 )
+from routing_svc.sa.learning import DEFAULT_RULE, learning_config
 from routing_svc.sa.objectives import COVERAGE, ROUTING, Objective
 from routing_svc.sa.plane import EuclideanPlane
 from routing_svc.sa.schedules import (
@@ -26,9 +29,12 @@ from routing_svc.sa.space import Assignment, Requirement, Space
 
 __all__ = [
     "COVERAGE",
+    "DEFAULT_RULE",
     "ROUTING",
     "Annealing",
     "Assignment",
+    "Consolidation",
+    "ConsolidationPolicy",
     "Constant",
     "Counting",
     "Dispatch",
@@ -41,11 +47,13 @@ __all__ = [
     "Objective",
     "Outcome",
     "Requirement",
+    "Rule",
     "Schedule",
     "Space",
     "Vehicle",
     "default_probe",
     "default_schedule",
+    "learning_config",
     "prior_counts",
     "schedule_from_dict",
 ]

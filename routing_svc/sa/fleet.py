@@ -12,21 +12,35 @@ that type by travel time ``D / v`` are found in one search; the target is
 served when the last of them arrives, and only that vehicle moves,
 ``step_amount`` (eqs. (9)-(10), see :mod:`routing_svc.sa.objectives`) along its
 shortest path toward ``z``.
+
+Three rules (:class:`Rule`): the paper's step alone; the paper's step with the
+backward probe; and ``consolidating``, the paper's step held at junctions
+(:mod:`routing_svc.sa.held_step`) with periodic consolidations
+(:mod:`routing_svc.sa.consolidation`), the default of new fleets.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from enum import StrEnum
 from itertools import compress, count
 from operator import is_not, ne
 from typing import Any, Generic, cast
 
 import numpy as np
 
-from routing_svc.errors import Conflict, InvalidInput
+from routing_svc.errors import Conflict, InvalidInput, ReplayMismatch
 from routing_svc.sa.annealing import Annealing
+from routing_svc.sa.consolidation import (
+    Consolidation,
+    ConsolidationPolicy,
+    SampleSpace,
+    consolidate,
+)
+from routing_svc.sa.held_step import Hold, JunctionSpace, held_step
 from routing_svc.sa.objectives import Objective
 from routing_svc.sa.requirements import build_requirement
 from routing_svc.sa.schedules import Counting, Schedule, schedule_from_dict
@@ -53,9 +67,20 @@ class Vehicle:
             raise InvalidInput(f"vehicle {self.id!r}: speed must be finite and > 0")
 
 
+class Rule(StrEnum):
+    """The learning rule of a fleet."""
+
+    PAPER = "paper"
+    """Eq. (10) alone: the mover steps ``gamma_k`` toward the target."""
+    PROBE = "probe"
+    """Eq. (10) with the backward probe (:attr:`FleetConfig.probe`)."""
+    CONSOLIDATING = "consolidating"
+    """Eq. (10) held at junctions, and consolidations of recent targets."""
+
+
 @dataclass(frozen=True, slots=True)
 class FleetConfig:
-    """How the fleet learns: objective, step schedule, what ``k`` counts, noise, seed."""
+    """How the fleet learns: objective, step schedule, what ``k`` counts, noise, seed, rule."""
 
     objective: Objective
     schedule: Schedule
@@ -81,9 +106,31 @@ class FleetConfig:
     serves from its starting position (:func:`prior_counts`): its step counter
     starts there, so a fleet started at the p-median of that sample goes on
     with the small steps of a fleet that has seen it. Empty: all zero."""
+    window: float | None = None
+    """``consolidating`` only: the pressure ``h`` (cost) that takes a reference off a
+    junction (:func:`routing_svc.sa.held_step.held_step`)."""
+    consolidation: ConsolidationPolicy | None = None
+    """``consolidating`` only: when to consolidate."""
+
+    def __post_init__(self) -> None:
+        if self.consolidation is None and self.window is None:
+            return
+        if self.consolidation is None or self.window is None:
+            raise InvalidInput("a consolidating fleet needs both a window and a policy")
+        if not (math.isfinite(self.window) and self.window > 0.0):
+            raise InvalidInput("the junction window must be a finite cost > 0")
+        if self.probe is not None or self.annealing is not None:
+            raise InvalidInput("a consolidating fleet takes neither a probe nor annealing")
+
+    @property
+    def rule(self) -> Rule:
+        """The learning rule these settings give."""
+        if self.consolidation is not None:
+            return Rule.CONSOLIDATING
+        return Rule.PAPER if self.probe is None else Rule.PROBE
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        data: dict[str, Any] = {
             "objective": self.objective.power,
             "step": self.schedule.to_dict(),
             "counting": self.counting.value,
@@ -92,10 +139,19 @@ class FleetConfig:
             "probe": self.probe,
             **({"prior_counts": list(self.prior_counts)} if self.prior_counts else {}),
         }
+        if self.consolidation is not None:
+            data["rule"] = Rule.CONSOLIDATING.value
+            data["window"] = self.window
+            data["consolidation"] = self.consolidation.to_dict()
+        return data
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> FleetConfig:
+        """Settings from :meth:`to_dict`; a dict without ``rule`` (stored before the
+        rule existed) keeps the probe rule or the paper's, as it was."""
         annealing = data.get("annealing")
+        rule = Rule(data.get("rule", Rule.PROBE if data.get("probe") is not None else "paper"))
+        consolidating = rule is Rule.CONSOLIDATING
         return cls(
             objective=Objective.parse(data["objective"]),
             schedule=schedule_from_dict(data["step"]),
@@ -104,6 +160,10 @@ class FleetConfig:
             seed=int(data.get("seed", 0)),
             probe=None if data.get("probe") is None else float(data["probe"]),
             prior_counts=tuple(int(c) for c in data.get("prior_counts", ())),
+            window=float(data["window"]) if consolidating else None,
+            consolidation=ConsolidationPolicy.from_dict(data["consolidation"])
+            if consolidating
+            else None,
         )
 
 
@@ -118,6 +178,28 @@ class FleetState(Generic[P]):
     """Per vehicle, the junction behind its reference whose turns it gave up (the end
     of an edge, see :meth:`DirectedSpace.entry`), or ``None`` when unknown; kept only
     with :attr:`FleetConfig.probe`. Empty means all unknown."""
+    learning: Learning[P] | None = None
+    """The ``consolidating`` rule's own state (``None`` for the other rules)."""
+
+
+@dataclass(slots=True)
+class Learning(Generic[P]):
+    """What the ``consolidating`` rule keeps besides the references."""
+
+    holds: list[Hold[P] | None]
+    """Per vehicle, its hold on a junction (:class:`~routing_svc.sa.held_step.Hold`)."""
+    anchor: list[P]
+    """The last accepted references (at first, the starting ones)."""
+    reservoir: deque[P]
+    """The most recent targets that needed any one vehicle, oldest first."""
+    epoch: int = 0
+    """Target count at which the current epoch of the demand began."""
+    next_consolidation: int = 0
+    """Target count at which the next consolidation is due."""
+    baseline: float | None = None
+    """Held-out mean cost of the references at the last consolidation."""
+    block_cost: float = 0.0
+    block_size: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -151,6 +233,8 @@ class Outcome(Generic[P]):
     backed_off: tuple[tuple[int, P], ...] = ()
     """Vehicles (index, new position) that the backward probe moved back, in index
     order; the mover among them made no forward step (:attr:`FleetConfig.probe`)."""
+    consolidation: Consolidation[P] | None = None
+    """The consolidation this target triggered, applied after its step (``consolidating``)."""
 
 
 @dataclass
@@ -209,6 +293,15 @@ class Fleet(Generic[P]):
         self._types = tuple(v.type for v in self.vehicles)
         self._index = {v.id: i for i, v in enumerate(self.vehicles)}
         self._any_one, _ = build_requirement(self._types, None)
+        policy = self.config.consolidation
+        if policy is not None and self.state.learning is None:
+            self.state.learning = Learning(
+                holds=[None] * n,
+                anchor=list(self.state.positions),
+                reservoir=deque(maxlen=policy.reservoir),
+                epoch=self.state.targets,
+                next_consolidation=self.state.targets + policy.first,
+            )
 
     @classmethod
     def create(
@@ -267,6 +360,9 @@ class Fleet(Generic[P]):
         space's compiled form of this update when it has one
         (:class:`~routing_svc.sa.space.SingleTargetServing`), with the same result.
         """
+        learning = self.state.learning
+        if learning is not None and self.config.consolidation is not None:
+            return self._observe_held(learning, self.config.consolidation, target, requires)
         if not requires and self.config.annealing is None:
             serving = self._serving()
             if serving is not None:
@@ -306,6 +402,129 @@ class Fleet(Generic[P]):
         self.state.updates[mover] += 1
         self.state.targets += 1
         return Outcome(index, dispatch, gamma, amount, noise, old, new, tuple(backed_off))
+
+    def _observe_held(
+        self,
+        learning: Learning[P],
+        policy: ConsolidationPolicy,
+        target: P,
+        requires: Sequence[str] | None,
+        recorded: Consolidation[P] | None = None,
+    ) -> Outcome[P]:
+        """:meth:`observe` under the ``consolidating`` rule: the held step of the mover
+        (:func:`~routing_svc.sa.held_step.held_step`), then the shift test and, when due,
+        a consolidation (``recorded``: apply that one instead of solving)."""
+        dispatch, found = self._search(target, requires)
+        state = self.state
+        mover = found.mover
+        gamma = self.step_size(mover)
+        amount = self.config.objective.step_amount(
+            gamma=gamma, path_cost=found.mover_cost, speed=float(self._speeds[mover])
+        )
+        old = state.positions[mover]
+        space = self.space
+        if _has_junctions(type(space)):
+            assert self.config.window is not None
+            new, moved, hold = held_step(
+                cast(JunctionSpace[P], space),
+                old,
+                target,
+                found.route,
+                amount=amount,
+                path_cost=found.mover_cost,
+                hold=learning.holds[mover],
+                window=self.config.window,
+            )
+            learning.holds[mover] = hold
+        else:
+            new = space.advance(old, target, found.route, amount) if amount > 0.0 else old
+            moved = amount
+        index = state.targets
+        state.positions[mover] = new
+        state.updates[mover] += 1
+        state.targets += 1
+        consolidation = None
+        if not requires and self._consolidates():
+            consolidation = self._learn_from(learning, policy, target, dispatch.objective, recorded)
+        elif recorded is not None:
+            raise ReplayMismatch("a consolidation was recorded for a target that makes none")
+        return Outcome(index, dispatch, gamma, moved, 0.0, old, new, (), consolidation)
+
+    def _consolidates(self) -> bool:
+        """Whether this fleet can consolidate: one type, one speed, a space that can."""
+        return (
+            len(set(self._types)) == 1
+            and bool(np.all(self._speeds == self._speeds[0]))
+            and _samples(type(self.space))
+        )
+
+    def _learn_from(
+        self,
+        learning: Learning[P],
+        policy: ConsolidationPolicy,
+        target: P,
+        cost: float,
+        recorded: Consolidation[P] | None,
+    ) -> Consolidation[P] | None:
+        """Keep ``target``, run the shift test on its ``cost`` and consolidate when due."""
+        state = self.state
+        learning.reservoir.append(target)
+        learning.block_cost += cost
+        learning.block_size += 1
+        if learning.block_size >= policy.block:
+            mean = learning.block_cost / learning.block_size
+            baseline = learning.baseline
+            if baseline is not None and mean > policy.shift_ratio * baseline:
+                recent = list(learning.reservoir)[-policy.block :]
+                learning.reservoir.clear()
+                learning.reservoir.extend(recent)
+                learning.epoch = state.targets
+                learning.next_consolidation = state.targets + policy.first
+                learning.baseline = None
+            learning.block_cost, learning.block_size = 0.0, 0
+        if state.targets < learning.next_consolidation:
+            if recorded is not None:
+                raise ReplayMismatch("a consolidation was recorded where none was due")
+            return None
+        done = recorded
+        if done is None:
+            done = consolidate(
+                cast(SampleSpace[P], self.space),
+                state.positions,
+                learning.anchor,
+                list(learning.reservoir),
+                power=self.config.objective.power,
+                confidence=policy.confidence,
+                updates=state.updates,
+            )
+        if len(done.positions) != len(self.vehicles) or len(done.updates) != len(self.vehicles):
+            raise ReplayMismatch("a recorded consolidation does not match the fleet's vehicles")
+        if done.accepted:
+            state.positions[:] = done.positions
+            state.updates[:] = done.updates
+            learning.anchor = list(done.positions)
+            learning.holds = [None] * len(self.vehicles)
+        learning.baseline = done.held_out_after
+        learning.next_consolidation = policy.next_after(now=state.targets, epoch=learning.epoch)
+        return done
+
+    def replay_observe(
+        self, target: P, requires: Sequence[str] | None, recorded: Consolidation[P] | None
+    ) -> Outcome[P]:
+        """:meth:`observe` for replay: the consolidation this target triggered is
+        ``recorded`` and applied, not solved again.
+
+        Raises
+        ------
+        ReplayMismatch
+            A consolidation recorded where the fleet makes none.
+        """
+        learning, policy = self.state.learning, self.config.consolidation
+        if learning is None or policy is None:
+            if recorded is not None:
+                raise ReplayMismatch("a consolidation was recorded for a fleet that makes none")
+            return self.observe(target, requires)
+        return self._observe_held(learning, policy, target, requires, recorded)
 
     def _serving(self) -> SingleTargetServing[P] | None:
         """The space's compiled update for this fleet (kept per space and config), or ``None``."""
@@ -441,7 +660,51 @@ class Fleet(Generic[P]):
             "updates": list(self.state.updates),
             "targets": self.state.targets,
             "entries": [None if e is None else self.space.encode(e) for e in self.state.entries],
+            **({} if self.state.learning is None else {"learning": self._learning_dict()}),
         }
+
+    def _learning_dict(self) -> dict[str, Any]:
+        learning = self.state.learning
+        assert learning is not None
+        encode = self.space.encode
+        return {
+            "holds": [
+                None if h is None else {"exit": encode(h.exit), "pressure": h.pressure}
+                for h in learning.holds
+            ],
+            "anchor": [encode(p) for p in learning.anchor],
+            "reservoir": [encode(p) for p in learning.reservoir],
+            "epoch": learning.epoch,
+            "next_consolidation": learning.next_consolidation,
+            "baseline": learning.baseline,
+            "block_cost": learning.block_cost,
+            "block_size": learning.block_size,
+        }
+
+    def _learning_from(self, data: dict[str, Any]) -> Learning[P]:
+        policy = self.config.consolidation
+        if policy is None:
+            raise InvalidInput("snapshot has learning state for a fleet without the rule")
+        decode = self.space.decode
+        n = len(self.vehicles)
+        holds: list[Hold[P] | None] = [
+            None if h is None else Hold(decode(h["exit"]), float(h["pressure"]))
+            for h in data["holds"]
+        ]
+        anchor = [decode(p) for p in data["anchor"]]
+        if len(holds) != n or len(anchor) != n:
+            raise InvalidInput("snapshot does not match the fleet's vehicles")
+        baseline = data["baseline"]
+        return Learning(
+            holds=holds,
+            anchor=anchor,
+            reservoir=deque((decode(p) for p in data["reservoir"]), maxlen=policy.reservoir),
+            epoch=int(data["epoch"]),
+            next_consolidation=int(data["next_consolidation"]),
+            baseline=None if baseline is None else float(baseline),
+            block_cost=float(data["block_cost"]),
+            block_size=int(data["block_size"]),
+        )
 
     def restore(self, data: dict[str, Any]) -> None:
         """Load a :meth:`snapshot` taken from a fleet with the same vehicles."""
@@ -453,7 +716,12 @@ class Fleet(Generic[P]):
         entries = [None if e is None else self.space.decode(e) for e in raw]
         if len(entries) != len(positions):
             raise InvalidInput("snapshot does not match the fleet's vehicles")
-        self.state = FleetState(positions, updates, int(data["targets"]), entries)
+        learning = None
+        if self.config.consolidation is not None:
+            if "learning" not in data:
+                raise InvalidInput("snapshot lacks the consolidating rule's state")
+            learning = self._learning_from(data["learning"])
+        self.state = FleetState(positions, updates, int(data["targets"]), entries, learning)
 
     def vehicle_index(self, vehicle_id: str) -> int:
         """Index of a vehicle by id (vehicles are sorted by id)."""
@@ -483,6 +751,28 @@ def prior_counts(
 
 
 _DIRECTED: dict[type, bool] = {}
+_JUNCTIONS: dict[type, bool] = {}
+_SAMPLES: dict[type, bool] = {}
+
+
+def _has_junctions(kind: type) -> bool:
+    """Whether spaces of class ``kind`` are :class:`JunctionSpace` s (checked once per class)."""
+    known = _JUNCTIONS.get(kind)
+    if known is None:
+        known = _JUNCTIONS[kind] = all(
+            callable(getattr(kind, name, None)) for name in ("junction_ahead", "at_junction")
+        )
+    return known
+
+
+def _samples(kind: type) -> bool:
+    """Whether spaces of class ``kind`` are :class:`SampleSpace` s (checked once per class)."""
+    known = _SAMPLES.get(kind)
+    if known is None:
+        known = _SAMPLES[kind] = all(
+            callable(getattr(kind, name, None)) for name in ("candidate_references", "cost_matrix")
+        )
+    return known
 
 
 def _is_directed(kind: type) -> bool:

@@ -134,10 +134,12 @@ class TargetResult(NamedTuple):
     noise: float
     new_position: dict[str, Any]
     backed_off: Sequence[tuple[str, dict[str, Any]]]
+    consolidated: dict[str, Any] | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """The result as the API documents it (``version`` is ``seq``)."""
-        return {
+        extra = {} if self.consolidated is None else {"consolidated": self.consolidated}
+        return extra | {
             "seq": self.seq,
             "version": self.seq,
             "target": self.target,
@@ -168,6 +170,8 @@ class TargetResult(NamedTuple):
             return dumps(self.as_dict())
 
     def _templated(self) -> str:
+        if self.consolidated is not None:
+            raise _Untemplated
         cost = self.cost
         cost_text = _number(cost)
         seq_text = _number(self.seq)

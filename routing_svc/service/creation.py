@@ -1,9 +1,8 @@
 """From a ``POST /v1/fleets`` body to the ``fleet_created`` event payload.
 
 Everything that needs a choice is decided here, once, and stored: snapped
-starting positions, the default step schedule (derived from the network's
-typical trip cost, see :func:`routing_svc.sa.schedules.default_schedule`),
-the probe window (:func:`routing_svc.sa.schedules.default_probe`), the
+starting positions, the learning rule with its defaults (derived from the
+network's typical trip cost, see :func:`routing_svc.sa.learning_config`), the
 optimum start with the step counters it implies
 (:func:`routing_svc.sa.prior_counts`) and the reference optimum. Replay then
 needs none of it.
@@ -14,15 +13,8 @@ from __future__ import annotations
 from typing import Any
 
 from routing_svc.errors import InvalidInput
-from routing_svc.sa import (
-    Annealing,
-    FleetConfig,
-    Objective,
-    default_probe,
-    default_schedule,
-    prior_counts,
-)
-from routing_svc.sa.schedules import DEFAULT_PROBE, Counting, schedule_from_dict
+from routing_svc.sa import Annealing, Objective, learning_config, prior_counts
+from routing_svc.sa.schedules import Counting, schedule_from_dict
 from routing_svc.service.networks import NetworkEntry
 from routing_svc.service.reference import (
     build_demand,
@@ -32,16 +24,6 @@ from routing_svc.service.reference import (
 )
 from routing_svc.service.schemas import FleetSpec
 from routing_svc.types import NetPosition
-
-
-def _probe_window(spec: FleetSpec, typical_cost: float) -> float | None:
-    """The fleet's probe window (cost units), or ``None`` for the paper's rule alone."""
-    fraction = DEFAULT_PROBE if spec.probe is None else spec.probe
-    if fraction == 0.0:
-        return None
-    return default_probe(
-        typical_cost=typical_cost, n_vehicles=len(spec.vehicles), fraction=fraction
-    )
 
 
 def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any]:
@@ -71,22 +53,19 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
     else:
         starts = {v.id: entry.resolve(v.position) for v in spec.vehicles if v.position}
         counts = ()
-    schedule = (
-        schedule_from_dict(spec.step.to_dict())
-        if spec.step is not None
-        else default_schedule(
-            typical_cost=space.typical_cost(), n_vehicles=n, power=objective.power
-        )
-    )
-    config = FleetConfig(
+    rule = spec.learning_rule()
+    config = learning_config(
+        rule,
+        typical_cost=space.typical_cost(),
+        n_vehicles=n,
         objective=objective,
-        schedule=schedule,
+        seed=spec.seed,
+        schedule=None if spec.step is None else schedule_from_dict(spec.step.to_dict()),
         counting=Counting(spec.counting),
         annealing=None
         if spec.annealing is None
         else Annealing(spec.annealing.scale, spec.annealing.decay),
-        seed=spec.seed,
-        probe=_probe_window(spec, space.typical_cost()),
+        probe=None if rule == "paper" and spec.probe == 0.0 else spec.probe,
         prior_counts=counts,
     )
     reference = None

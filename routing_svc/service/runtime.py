@@ -6,7 +6,9 @@ applied events):
 - ``fleet_created`` (seq 1): network, cost, config, vehicles with their
   starting positions, the optional reference demand and its optimum;
 - ``target``: a snapped target position and its required types; the result is
-  the answer the client got (:meth:`FleetRuntime.apply_target`);
+  the answer the client got (:meth:`FleetRuntime.apply_target`), with the
+  consolidation the target triggered, if any (``consolidating`` fleets), which
+  replay applies as recorded instead of solving it again;
 - ``weights_updated``: per-edge travel times (traffic-driven costs);
 - ``fleet_deleted``.
 
@@ -25,7 +27,7 @@ from typing import Any
 from routing_svc.demand import DemandDistribution
 from routing_svc.errors import Conflict, InvalidInput, ReplayMismatch
 from routing_svc.network import RoadSpace
-from routing_svc.sa import Fleet, FleetConfig, Vehicle
+from routing_svc.sa import Consolidation, Fleet, FleetConfig, Vehicle
 from routing_svc.service.canonical import TargetResult, dumps, target_payload
 from routing_svc.service.networks import NetworkEntry
 from routing_svc.types import NetPosition
@@ -62,10 +64,24 @@ class FleetRuntime:
 
     # -- events -----------------------------------------------------------------
 
-    def apply_target(self, target: NetPosition, requires: Sequence[str] | None) -> tuple[str, str]:
-        """Serve one target; return the event's payload and result JSON."""
+    def apply_target(
+        self,
+        target: NetPosition,
+        requires: Sequence[str] | None,
+        *,
+        recorded: Consolidation[NetPosition] | None = None,
+        replaying: bool = False,
+    ) -> tuple[str, str]:
+        """Serve one target; return the event's payload and result JSON.
+
+        ``replaying``: the event is read back from the log, and ``recorded`` is the
+        consolidation its stored result holds (applied, not solved again).
+        """
         self._check_live()
-        outcome = self.fleet.observe(target, requires)
+        if replaying:
+            outcome = self.fleet.replay_observe(target, requires, recorded)
+        else:
+            outcome = self.fleet.observe(target, requires)
         seq = self.version + 1
         d = outcome.dispatch
         described = self.entry.describe(target)
@@ -90,6 +106,9 @@ class FleetRuntime:
             backed_off=[
                 (self.fleet.vehicles[j].id, self.entry.describe(p)) for j, p in outcome.backed_off
             ],
+            consolidated=None
+            if outcome.consolidation is None
+            else outcome.consolidation.to_dict(self.base_space.encode),
         ).to_json()
         payload = target_payload(self.base_space.encode(target), required)
         self.version = seq
@@ -124,7 +143,10 @@ class FleetRuntime:
         payload = json.loads(payload_json)
         if kind == "target":
             target = self.base_space.decode(payload["target"])
-            _, result = self.apply_target(target, payload["requires"])
+            recorded = self._recorded_consolidation(result_json)
+            _, result = self.apply_target(
+                target, payload["requires"], recorded=recorded, replaying=True
+            )
         elif kind == "weights_updated":
             _, result = self.apply_travel_times(payload["times"])
         elif kind == "fleet_deleted":
@@ -133,6 +155,16 @@ class FleetRuntime:
             raise ReplayMismatch(f"fleet {self.id}: unknown event kind {kind!r} at {seq}")
         if result_json is not None and result != result_json:
             raise ReplayMismatch(f"fleet {self.id}: event {seq} replays to a different result")
+
+    def _recorded_consolidation(self, result_json: str | None) -> Consolidation[NetPosition] | None:
+        """The consolidation a stored target result holds (only ``consolidating`` fleets
+        record any)."""
+        if result_json is None or self.fleet.config.consolidation is None:
+            return None
+        if '"consolidated"' not in result_json:
+            return None
+        data = json.loads(result_json).get("consolidated")
+        return None if data is None else Consolidation.from_dict(data, self.base_space.decode)
 
     def _check_live(self) -> None:
         if self.deleted:
@@ -178,6 +210,7 @@ class FleetRuntime:
             "counting": cfg.counting.value,
             "annealing": None if cfg.annealing is None else cfg.annealing.to_dict(),
             "seed": cfg.seed,
+            "rule": cfg.rule.value,
             "probe": cfg.probe,
             "version": self.version,
             "targets": self.fleet.state.targets,

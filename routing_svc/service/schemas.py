@@ -6,6 +6,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, field_validator
 
+from routing_svc.sa import DEFAULT_RULE
+
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Identifier = Annotated[
     str, StringConstraints(min_length=1, max_length=128, pattern=r"^[A-Za-z0-9_.:\-]+$")
@@ -93,6 +95,19 @@ class FleetSpec(Strict):
     vehicles: Annotated[list[VehicleSpec], Field(min_length=1, max_length=10_000)]
     start: StartSpec | None = None
     reference_demand: DemandSpec | None = None
+    rule: (
+        Annotated[
+            Literal["consolidating", "probe", "paper"],
+            Field(
+                description="Learning rule: 'consolidating' (held steps of eq. (10) and "
+                "consolidations of recent targets; the default), 'probe' (eq. (10) with "
+                "the backward probe) or 'paper' (eq. (10) alone). Without a rule, a "
+                "'probe' value or annealing chooses the probe rule (a probe of 0: the "
+                "paper's), as before.",
+            ),
+        ]
+        | None
+    ) = None
     probe: (
         Annotated[
             float,
@@ -100,14 +115,25 @@ class FleetSpec(Strict):
                 allow_inf_nan=False,
                 ge=0.0,
                 le=1.0,
-                description="Window of the backward probe that sees where the expected "
-                "cost jumps on a directed network, as a fraction of the cell radius "
-                "R = typical trip cost / sqrt(vehicles); default 0.05, 0 = the paper's "
-                "rule alone.",
+                description="The probe rule's window of the backward probe that sees where "
+                "the expected cost jumps on a directed network, as a fraction of the cell "
+                "radius R = typical trip cost / sqrt(vehicles); default 0.05, 0 = the "
+                "paper's rule alone.",
             ),
         ]
         | None
     ) = None
+
+    def learning_rule(self) -> str:
+        """The rule asked for: ``rule``, else the probe rule when a probe window or
+        annealing is given (the paper's for a window of 0), else the default."""
+        if self.rule is not None:
+            return self.rule
+        if self.probe is not None:
+            return "probe" if self.probe > 0.0 else "paper"
+        if self.annealing is not None:
+            return "probe"
+        return DEFAULT_RULE.value
 
     @field_validator("vehicles")
     @classmethod

@@ -237,17 +237,29 @@ def test_a_network_uploaded_through_one_instance_serves_another(
     assert first.get("/v1/fleets/f1").json()["network"] == "town"
 
 
-def test_the_probe_is_on_by_default_and_can_be_turned_off(client: TestClient) -> None:
+def test_the_rule_is_consolidating_by_default_and_a_probe_window_keeps_the_probe_rule(
+    client: TestClient,
+) -> None:
     radius = SPACE.typical_cost() / np.sqrt(3)
     default = client.post("/v1/fleets", json=fleet_body("on")).json()
-    assert default["probe"] == pytest.approx(0.05 * radius)
+    assert default["rule"] == "consolidating" and default["probe"] is None
+    assert default["step"]["a"] == pytest.approx(0.01 * radius)
+    probe = client.post("/v1/fleets", json=fleet_body("probe", rule="probe")).json()
+    assert probe["rule"] == "probe" and probe["probe"] == pytest.approx(0.05 * radius)
     wider = client.post("/v1/fleets", json=fleet_body("wide", probe=0.2)).json()
-    assert wider["probe"] == pytest.approx(0.2 * radius)
+    assert wider["rule"] == "probe" and wider["probe"] == pytest.approx(0.2 * radius)
     off = client.post("/v1/fleets", json=fleet_body("off", probe=0)).json()
-    assert off["probe"] is None
-    bad = client.post("/v1/fleets", json=fleet_body("bad", probe=-0.1))
-    assert bad.status_code == 422 and bad.headers["content-type"] == "application/problem+json"
-    assert client.get("/v1/fleets/bad").status_code == 404
+    assert off["rule"] == "paper" and off["probe"] is None
+    for name, extra in [
+        ("bad", {"probe": -0.1}),
+        ("mixed", {"rule": "consolidating", "probe": 0.1}),
+        ("noise", {"rule": "consolidating", "annealing": {"scale": 5.0}}),
+        ("unknown", {"rule": "kmeans"}),
+    ]:
+        bad = client.post("/v1/fleets", json=fleet_body(name, **extra))
+        assert bad.status_code == 422, (name, bad.text)
+        assert bad.headers["content-type"] == "application/problem+json"
+        assert client.get(f"/v1/fleets/{name}").status_code == 404
 
 
 def test_an_optimum_start_counts_the_sample_in_the_step_sizes(client: TestClient) -> None:
