@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from routing_svc.errors import InvalidInput
-from routing_svc.sa.interchange import greedy_interchange, neighbourhood_search
 from routing_svc.optimum.lagrangian import lagrangian_bound
 from routing_svc.optimum.pmedian import objective, solve_pmedian
+from routing_svc.sa.interchange import greedy_interchange, neighbourhood_search
 from routing_svc.types import FloatArray
 from tests.optimum.conftest import all_subset_values, brute_force_pmedian
 
