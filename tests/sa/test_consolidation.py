@@ -467,7 +467,9 @@ def test_a_shift_of_the_demand_starts_a_new_epoch(space: RoadSpace) -> None:
     east, east_targets = demand_stream(
         9, 4000, centres=[(xmin + 0.8 * dx, ymin + 0.8 * dy)], spread=spread
     )
-    policy = ConsolidationPolicy()
+    # a ratio of 2: the demand moving across the district costs several times more, while
+    # the noise of a 250-target block of the stationary demand stays well below it
+    policy = ConsolidationPolicy(shift_ratio=2.0)
     fleet = consolidating_fleet(space, policy=policy)
     done = [o.index + 1 for o in map(fleet.observe, west_targets) if o.consolidation is not None]
     assert done == schedule(policy, start=policy.first, epoch=0, until=2000)
