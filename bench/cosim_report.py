@@ -15,19 +15,13 @@ checkout; skipped with a note if absent). 2 simulated hours of requests,
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
-# bench/http.py (another benchmark) would shadow the standard library's ``http``
-# that httpx needs: drop this script's folder from the import path.
-if sys.path and Path(sys.path[0]).resolve() == Path(__file__).resolve().parent:
-    del sys.path[0]
-
 import argparse
 import json
 import math
+import sys
 import time
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np

@@ -39,7 +39,7 @@ from routing_svc.network.search import (
 )
 from routing_svc.network.serving import FleetUpdate
 from routing_svc.network.snapping import point_on_edge
-from routing_svc.network.stops import at_junction, candidate_references, junction_ahead
+from routing_svc.network.stops import candidate_references, junction_ahead
 from routing_svc.network.twins import reverse_edges, twin
 from routing_svc.network.walking import check_route, random_walk, walk_route
 from routing_svc.sa.space import Assignment, Requirement
@@ -330,12 +330,6 @@ class RoadSpace:
         if not isinstance(route, np.ndarray) or route.ndim != 1 or route.shape[0] == 0:
             raise InvalidInput("route must be a non-empty 1-d array of edge indices")
         return junction_ahead(self.network, self._costs, position, route.tolist())
-
-    def at_junction(self, position: NetPosition) -> bool:
-        """Whether ``position`` is a junction, every turn open
-        (:func:`routing_svc.network.stops.at_junction`)."""
-        check_position(self.network, position, what="position")
-        return at_junction(self.network, position)
 
     def candidate_references(
         self, sample: Sequence[NetPosition], fixed: Sequence[NetPosition]

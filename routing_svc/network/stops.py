@@ -7,7 +7,7 @@ Two questions of the learning rules of :mod:`routing_svc.sa.held_step` and
   follows a route toward a target, and the cost to it. A junction is the end of
   an edge, ``(e, len(e))``, where a waiting vehicle still has every turn of
   the junction; a reference that moves past it gives them up, which is where
-  the expected cost ``J`` jumps.
+  the expected cost ``J`` jumps. It also names the direction a target pulls.
 - :func:`candidate_references`: the positions a consolidation may open, the
   targets of the sample and the ends of their edges (Hakimi's demand points
   plus vertices, see :mod:`routing_svc.optimum.candidates`), with the given
@@ -22,21 +22,9 @@ import numpy as np
 
 from routing_svc.network.compile import CompiledNetwork
 from routing_svc.network.costs import EdgeCosts
-from routing_svc.network.twins import reverse_edges
 from routing_svc.types import NetPosition
 
-__all__ = ["at_junction", "candidate_references", "junction_ahead"]
-
-
-def at_junction(network: CompiledNetwork, position: NetPosition) -> bool:
-    """Whether ``position`` is the end of its edge, or the start of a two-way edge.
-
-    The start ``(r, 0)`` of an edge with a twin ``e`` is the same place as the end of
-    ``e`` (a vehicle there may leave either way).
-    """
-    if position.offset >= float(network.length[position.edge]):
-        return True
-    return position.offset == 0.0 and int(reverse_edges(network)[position.edge]) >= 0
+__all__ = ["candidate_references", "junction_ahead"]
 
 
 def junction_ahead(
@@ -49,8 +37,9 @@ def junction_ahead(
 
     ``route`` is the mover's edge path from the search: its first edge is the
     position's edge, or the position's twin edge when the vehicle leaves the other
-    way. ``None`` when the route ends on the position's own edge before its end
-    (the target is ahead on the same edge) without reaching a junction.
+    way. The junction is the end of that first edge (even when the target lies on
+    it, before its end), or, for a position already at that end, the end of the
+    route's next edge; ``None`` for a position at the end of a one-edge route.
     """
     first = int(route[0])
     length = network.length

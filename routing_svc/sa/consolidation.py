@@ -16,19 +16,23 @@ references, from the last accepted ones and from scratch.
 
 A p-median of ``m`` targets fits their noise: taken blindly it would pull a
 fleet that already stands at the optimum away from it. So the reservoir is
-split. The solver sees every other target (the *fit* half); the configuration
-it finds, or the last accepted one, replaces the current references only if it
-serves the other half (*held out*) better by more than ``confidence`` standard
-errors of the paired differences. Accepted, it is polished on the whole
-reservoir; each vehicle's step counter restarts at the number of reservoir
-targets it now serves, so that the paper's steps (eq. (10)) go on at the size
-of a fleet that has seen them.
+split in two halves (even and odd places) and each is solved alone; every
+*fresh* target (one that came after the current references were accepted, so
+that they were not fitted to it) is then priced from the configuration fitted on
+the *other* half, a cross-validated estimate of what solving again gains over
+the current references. Only if the
+gain exceeds ``confidence`` standard errors of the paired differences is the
+problem solved on the whole reservoir, from the current and the last accepted
+references and from scratch, and the best replaces the references; each
+vehicle's step counter restarts at the number of reservoir targets it now
+serves, so that the paper's steps (eq. (10)) go on at the size of a fleet that
+has seen them.
 
 Consolidations follow the demand's clock: ``first`` targets into an *epoch*, then
 each time the targets seen in the epoch have grown by the factor ``growth``, the
 period capped at ``longest``. The mean cost of
-each block of targets is compared with the held-out cost of the references at
-the last consolidation; a block that costs ``shift_ratio`` times more starts a
+each block of targets is compared with the mean cost expected of the references
+at the last consolidation; a block that costs ``shift_ratio`` times more starts a
 new epoch (the demand moved): the reservoir keeps that block only and the
 schedule starts again.
 
@@ -67,21 +71,21 @@ class ConsolidationPolicy:
     longest : int
         The longest period between two consolidations.
     confidence : float
-        Standard errors by which the held-out half must prefer a new configuration.
+        Standard errors by which the cross-validated gain must exceed zero.
     block : int
         Targets per block of the shift test.
     shift_ratio : float
-        A block whose mean cost exceeds this times the held-out cost of the
-        references starts a new epoch.
+        A block whose mean cost exceeds this times :attr:`Consolidation.baseline` of
+        the last consolidation starts a new epoch.
     """
 
     reservoir: int = 4000
     first: int = 250
     growth: float = 1.5
     longest: int = 8000
-    confidence: float = 1.0
+    confidence: float = 0.0
     block: int = 250
-    shift_ratio: float = 1.25
+    shift_ratio: float = 1.5
 
     def __post_init__(self) -> None:
         for name in ("reservoir", "first", "longest", "block"):
@@ -137,17 +141,22 @@ class Consolidation(Generic[P]):
         Every vehicle's step counter afterwards.
     sample : int
         Targets in the reservoir.
-    held_out_before, held_out_after : float
-        Mean cost ``c(T)`` of the held-out half from the references before and
-        after; ``held_out_after`` is the baseline of the shift test.
+    sample_before, sample_after : float
+        Mean cost ``c(T)`` of the reservoir's targets from the references before and
+        after.
+    gain, standard_error : float
+        The cross-validated change of the mean cost that solving again brings
+        (negative: better), and its standard error.
     """
 
     accepted: bool
     positions: tuple[P, ...]
     updates: tuple[int, ...]
     sample: int
-    held_out_before: float
-    held_out_after: float
+    sample_before: float
+    sample_after: float
+    gain: float
+    standard_error: float
 
     def to_dict(self, encode: Callable[[P], dict[str, object]]) -> dict[str, Any]:
         return {
@@ -155,9 +164,18 @@ class Consolidation(Generic[P]):
             "positions": [encode(p) for p in self.positions],
             "updates": list(self.updates),
             "sample": self.sample,
-            "held_out_before": self.held_out_before,
-            "held_out_after": self.held_out_after,
+            "sample_before": self.sample_before,
+            "sample_after": self.sample_after,
+            "gain": self.gain,
+            "standard_error": self.standard_error,
         }
+
+    @property
+    def baseline(self) -> float:
+        """The mean cost to expect from the references afterwards, the baseline of the
+        shift test: the cross-validated estimate when accepted (the fit on the whole
+        reservoir is no fair measure of its own targets), else the cost before."""
+        return self.sample_before + min(self.gain, 0.0) if self.accepted else self.sample_before
 
     @classmethod
     def from_dict(
@@ -169,8 +187,10 @@ class Consolidation(Generic[P]):
                 positions=tuple(decode(p) for p in data["positions"]),
                 updates=tuple(int(u) for u in data["updates"]),
                 sample=int(data["sample"]),
-                held_out_before=float(data["held_out_before"]),
-                held_out_after=float(data["held_out_after"]),
+                sample_before=float(data["sample_before"]),
+                sample_after=float(data["sample_after"]),
+                gain=float(data["gain"]),
+                standard_error=float(data["standard_error"]),
             )
         except (KeyError, TypeError, ValueError):
             raise InvalidInput("a recorded consolidation is malformed") from None
@@ -196,27 +216,34 @@ def consolidate(
     reservoir: Sequence[P],
     *,
     power: float,
+    speed: float,
     confidence: float,
     updates: Sequence[int],
+    fresh: int,
 ) -> Consolidation[P]:
-    """Solve the p-median of the fit half, test it on the held-out half, polish it on all.
+    """Solve each half of the reservoir, test each on the other half, solve all if it pays.
 
     Parameters
     ----------
     space : SampleSpace
-        The space (identical vehicles: costs are not divided by speeds).
+        The space.
     positions : sequence
         The current references, in the fleet's id order.
     anchor : sequence
-        The last accepted references (a second start, and a second challenger).
+        The last accepted references (a start of every solve).
     reservoir : sequence
-        The recent targets, oldest first; even places fit, odd places test.
+        The recent targets, oldest first; even and odd places are the two halves.
     power : float
         ``q`` of the service cost ``c(T) = T**q``.
+    speed : float
+        The speed factor of every vehicle (they are identical): ``T = D / speed``.
     confidence : float
-        Standard errors of the held-out test.
+        Standard errors of the cross-validated test.
     updates : sequence of int
         The step counters, returned unchanged when nothing is accepted.
+    fresh : int
+        How many of the reservoir's last targets came after the current references
+        were accepted: only they test.
     """
     p = len(positions)
     if len(reservoir) < 2 or len(anchor) != p or len(updates) != p:
@@ -224,44 +251,62 @@ def consolidate(
     targets = list(dict.fromkeys(reservoir))
     column = {z: j for j, z in enumerate(targets)}
     places = np.fromiter((column[z] for z in reservoir), dtype=np.int64, count=len(reservoir))
-    fit_weight = np.bincount(places[0::2], minlength=len(targets)).astype(np.float64)
-    held_weight = np.bincount(places[1::2], minlength=len(targets)).astype(np.float64)
-    fit_sample = [targets[j] for j in np.flatnonzero(fit_weight).tolist()]
-    sites = space.candidate_references(fit_sample, [*positions, *anchor])
+    halves = [
+        np.bincount(places[half::2], minlength=len(targets)).astype(np.float64) for half in (0, 1)
+    ]
+    weight = halves[0] + halves[1]
+    first_fresh = len(reservoir) - min(max(fresh, 0), len(reservoir))
+    tests = [
+        np.bincount(
+            places[first_fresh + (first_fresh + half) % 2 :: 2], minlength=len(targets)
+        ).astype(np.float64)
+        for half in (0, 1)
+    ]
+    sites = space.candidate_references(targets, [*positions, *anchor])
     row = {s: i for i, s in enumerate(sites)}
-    costs = np.asarray(space.cost_matrix(sites, targets), dtype=np.float64) ** power
-    current = _distinct(np.array([row[x] for x in positions], dtype=np.int64), len(sites))
+    costs = (np.asarray(space.cost_matrix(sites, targets), dtype=np.float64) / speed) ** power
+    actual = np.array([row[x] for x in positions], dtype=np.int64)
+    current = _distinct(actual, len(sites))
     anchored = _distinct(np.array([row[x] for x in anchor], dtype=np.int64), len(sites))
-    fitted = _best_fit(costs, fit_weight, [current, anchored])
-    if _total(costs, held_weight, anchored) < _total(costs, held_weight, fitted):
-        fitted = anchored
-    held = held_weight > 0
-    before = costs[current][:, held].min(axis=0)
-    after = costs[fitted][:, held].min(axis=0)
-    weights = held_weight[held]
-    total = float(weights.sum())
-    held_before = float(weights @ before) / total
-    difference = after - before
-    mean = float(weights @ difference) / total
-    spread = math.sqrt(max(float(weights @ (difference - mean) ** 2), 0.0) / total / total)
-    if not mean < -confidence * spread or not mean < 0.0:
-        unchanged = tuple(positions)
+    now = costs[actual].min(axis=0)
+    differences, weights = [], []
+    for fit, test in ((halves[0], tests[1]), (halves[1], tests[0])):
+        tested = test > 0
+        if not tested.any():
+            continue
+        challenger = _best_fit(costs, fit, [current, anchored])
+        differences.append((costs[challenger].min(axis=0) - now)[tested])
+        weights.append(test[tested])
+    if not differences:
+        before = float(weight @ now) / float(weight.sum())
         return Consolidation(
-            False, unchanged, tuple(updates), len(reservoir), held_before, held_before
+            False, tuple(positions), tuple(updates), len(reservoir), before, before, 0.0, 0.0
         )
-    weight = fit_weight + held_weight
-    chosen = fast_interchange(costs, weight, fitted)
+    difference, tested_weight = np.concatenate(differences), np.concatenate(weights)
+    total = float(tested_weight.sum())
+    gain = float(tested_weight @ difference) / total
+    spread = float(tested_weight @ (difference - gain) ** 2) / total
+    standard_error = math.sqrt(max(spread, 0.0) / total)
+    before = float(weight @ now) / float(weight.sum())
+    if not (gain < -confidence * standard_error and gain < 0.0):
+        return Consolidation(
+            False, tuple(positions), tuple(updates), len(reservoir), before, before, gain,
+            standard_error,
+        )  # fmt: skip
+    chosen = _best_fit(costs, weight, [current, anchored])
     ordered = _pair(current, chosen)
     owner = costs[ordered].argmin(axis=0)
     served = np.bincount(owner, weights=weight, minlength=p)
-    held_after = float(weights @ costs[ordered][:, held].min(axis=0)) / total
+    after = float(weight @ costs[ordered].min(axis=0)) / float(weight.sum())
     return Consolidation(
         True,
         tuple(sites[i] for i in ordered.tolist()),
         tuple(round(s) for s in served.tolist()),
         len(reservoir),
-        held_before,
-        held_after,
+        before,
+        after,
+        gain,
+        standard_error,
     )
 
 
@@ -278,7 +323,7 @@ def _distinct(rows: IntArray, n_sites: int) -> IntArray:
 
 
 def _best_fit(costs: FloatArray, weight: FloatArray, starts: list[IntArray]) -> IntArray:
-    """The best local optimum of the fit half from each start and from greedy addition."""
+    """The best local optimum for ``weight`` from each start and from greedy addition."""
     p = starts[0].size
     candidates = [fast_interchange(costs, weight, s) for s in starts]
     candidates.append(fast_interchange(costs, weight, greedy(costs, weight, p)))

@@ -197,7 +197,9 @@ class Learning(Generic[P]):
     next_consolidation: int = 0
     """Target count at which the next consolidation is due."""
     baseline: float | None = None
-    """Held-out mean cost of the references at the last consolidation."""
+    """:attr:`Consolidation.baseline` of the last consolidation (``None``: none yet)."""
+    accepted_at: int = 0
+    """Target count at which the current references were accepted (or started)."""
     block_cost: float = 0.0
     block_size: int = 0
 
@@ -301,6 +303,7 @@ class Fleet(Generic[P]):
                 reservoir=deque(maxlen=policy.reservoir),
                 epoch=self.state.targets,
                 next_consolidation=self.state.targets + policy.first,
+                accepted_at=self.state.targets,
             )
 
     @classmethod
@@ -494,8 +497,10 @@ class Fleet(Generic[P]):
                 learning.anchor,
                 list(learning.reservoir),
                 power=self.config.objective.power,
+                speed=float(self._speeds[0]),
                 confidence=policy.confidence,
                 updates=state.updates,
+                fresh=state.targets - learning.accepted_at,
             )
         if len(done.positions) != len(self.vehicles) or len(done.updates) != len(self.vehicles):
             raise ReplayMismatch("a recorded consolidation does not match the fleet's vehicles")
@@ -504,7 +509,8 @@ class Fleet(Generic[P]):
             state.updates[:] = done.updates
             learning.anchor = list(done.positions)
             learning.holds = [None] * len(self.vehicles)
-        learning.baseline = done.held_out_after
+            learning.accepted_at = state.targets
+        learning.baseline = done.baseline
         learning.next_consolidation = policy.next_after(now=state.targets, epoch=learning.epoch)
         return done
 
@@ -677,6 +683,7 @@ class Fleet(Generic[P]):
             "epoch": learning.epoch,
             "next_consolidation": learning.next_consolidation,
             "baseline": learning.baseline,
+            "accepted_at": learning.accepted_at,
             "block_cost": learning.block_cost,
             "block_size": learning.block_size,
         }
@@ -702,6 +709,7 @@ class Fleet(Generic[P]):
             epoch=int(data["epoch"]),
             next_consolidation=int(data["next_consolidation"]),
             baseline=None if baseline is None else float(baseline),
+            accepted_at=int(data["accepted_at"]),
             block_cost=float(data["block_cost"]),
             block_size=int(data["block_size"]),
         )
@@ -760,7 +768,7 @@ def _has_junctions(kind: type) -> bool:
     known = _JUNCTIONS.get(kind)
     if known is None:
         known = _JUNCTIONS[kind] = all(
-            callable(getattr(kind, name, None)) for name in ("junction_ahead", "at_junction")
+            callable(getattr(kind, name, None)) for name in ("junction_ahead", "advance")
         )
     return known
 

@@ -1,26 +1,23 @@
-"""The paper's step, held at junctions: the update rule of the ``consolidating`` fleet.
+"""The paper's step, held until it is worth a jump: the update rule of the ``consolidating`` fleet.
 
 On a directed road network the expected cost ``J`` of a fleet jumps where a
-reference leaves a junction: the demand it reached through the junction's other
-turns now needs a detour around the block. The step of eq. (10), a move
-``gamma_k`` along the path to the target, sees only the smooth part of ``J``, so
-even an infinitesimal step off a junction pays the whole jump; a fleet started at
-the optimum (whose references sit at junctions and demand points) is driven away.
+reference leaves a junction (the demand it reached through the junction's other
+turns now needs a detour around the block) or passes a target (which it now
+reaches only by a loop). The step of eq. (10), a move ``gamma_k`` along the
+path to the target, sees only the smooth part of ``J``, so even an
+infinitesimal step pays the whole jump; a fleet started at the optimum (whose
+references sit at junctions and demand points) is driven away from it.
 
-The held step keeps eq. (10) and changes only where it may stop:
-
-- a reference between junctions moves ``min(gamma_k, D)`` along the path, as in
-  eq. (10), but never past the next junction (it stops on it);
-- a reference on a junction stays, and accumulates the steps of the targets it
-  serves as a *pressure* toward the exit they leave by: a step toward the exit
-  held adds to it, a step toward another exit takes from it (a majority vote of
-  the targets it serves, weighted by ``gamma_k``); when the pressure reaches the
-  window ``h`` the reference leaves by that exit, ``min(pressure, D)`` along the
-  path, again not past the next junction.
-
-Leaving a junction therefore needs a net majority of the served demand beyond one
-exit, which is what makes the jump worth paying; the junctions and demand points
-where the p-median lies are fixed points.
+The held step keeps eq. (10) and changes only when it is applied. A reference
+accumulates the steps of the targets it serves as a *pressure* toward the
+direction they leave by (the first junction on their path): a step in the
+direction held adds to it, a step in another direction takes from it (a
+majority vote of the targets it serves, weighted by ``gamma_k``). When the
+pressure reaches the window ``h`` the reference moves ``min(pressure, D)``
+along the path, never past that junction. A reference therefore moves only for
+a net majority of its demand in one direction, by at least ``h`` or onto the
+junction, which is what makes a jump worth paying; the junctions and demand
+points where the p-median lies are fixed points.
 """
 
 from __future__ import annotations
@@ -51,10 +48,6 @@ class JunctionSpace(Protocol[P]):
     def junction_ahead(self, position: P, route: object) -> tuple[P, float] | None:
         """The first junction strictly ahead of ``position`` along ``route`` and its cost;
         ``None`` when the route ends before one."""
-        ...
-
-    def at_junction(self, position: P) -> bool:
-        """Whether ``position`` is a junction."""
         ...
 
     def advance(self, position: P, target: P, route: object, amount: float) -> P:
@@ -94,20 +87,18 @@ def held_step(
     if not (math.isfinite(amount) and amount >= 0.0 and math.isfinite(window) and window > 0.0):
         raise InvalidInput("a held step needs a finite amount >= 0 and a window > 0")
     ahead = space.junction_ahead(position, route)
-    if space.at_junction(position):
-        if ahead is None:
-            return position, 0.0, hold
-        exit_, _ = ahead
-        if hold is not None and hold.exit == exit_:
-            pressure = hold.pressure + amount
-        elif hold is not None and hold.pressure > amount:
-            return position, 0.0, Hold(hold.exit, hold.pressure - amount)
-        else:
-            pressure = amount - (hold.pressure if hold is not None else 0.0)
-        if pressure < window:
-            return position, 0.0, Hold(exit_, pressure)
-        amount = pressure
-    new, moved = _move(space, position, target, route, min(amount, path_cost), ahead)
+    if ahead is None:  # on the end of the target's edge: nowhere to go
+        return position, 0.0, hold
+    exit_ = ahead[0]
+    if hold is not None and hold.exit == exit_:
+        pressure = hold.pressure + amount
+    elif hold is not None and hold.pressure > amount:
+        return position, 0.0, Hold(hold.exit, hold.pressure - amount)
+    else:
+        pressure = amount - (hold.pressure if hold is not None else 0.0)
+    if pressure < window:
+        return position, 0.0, Hold(exit_, pressure)
+    new, moved = _move(space, position, target, route, min(pressure, path_cost), ahead)
     return new, moved, None
 
 
@@ -117,10 +108,10 @@ def _move(
     target: P,
     route: object,
     amount: float,
-    ahead: tuple[P, float] | None,
+    ahead: tuple[P, float],
 ) -> tuple[P, float]:
     """Move ``amount`` along the route, stopping on the junction ahead; and the cost moved."""
-    if ahead is not None and amount >= ahead[1]:
+    if amount >= ahead[1]:
         return ahead[0], ahead[1]
     if amount <= 0.0:
         return position, 0.0

@@ -1,4 +1,4 @@
-"""The paper's step held at junctions (``held_step``) and the junctions it stops at.
+"""The paper's step held until it reaches a window (``held_step``) and the junctions it stops at.
 
 The hand-made net has four junctions and six edges (lengths in metres)::
 
@@ -127,18 +127,32 @@ def test_the_net_is_the_one_described(network: CompiledNetwork, space: RoadSpace
 # -- a reference between junctions ---------------------------------------------------
 
 
-@pytest.mark.parametrize("amount", [0.0, 30.0, 79.5])
-def test_mid_edge_moves_the_amount_as_the_paper_does(
+@pytest.mark.parametrize("amount", [10.0, 30.0, 79.5])
+def test_mid_edge_a_step_of_the_window_or_more_moves_as_the_paper_does(
     network: CompiledNetwork, space: RoadSpace, amount: float
 ) -> None:
     source, target = at(network, "a", 20.0), at(network, "b", 50.0)
     route, cost = route_to(space, source, target)
     assert cost == 130.0  # 80 to j1, 50 along b
-    new, moved, hold = step(space, source, target, amount=amount)
+    new, moved, hold = step(space, source, target, amount=amount, window=10.0)
     assert new == at(network, "a", 20.0 + amount)
-    assert new == (source if amount == 0.0 else space.advance(source, target, route, amount))
+    assert new == space.advance(source, target, route, amount)
     assert moved == amount
     assert hold is None
+
+
+@pytest.mark.parametrize("amount", [0.0, 4.0, 9.5])
+def test_mid_edge_a_step_below_the_window_only_records_pressure(
+    network: CompiledNetwork, space: RoadSpace, amount: float
+) -> None:
+    # a reference on a demand point pays a jump for any move past it, as on a junction
+    source, target = at(network, "a", 20.0), at(network, "b", 50.0)
+    new, moved, hold = step(space, source, target, amount=amount, window=10.0)
+    assert (new, moved) == (source, 0.0)
+    assert hold == Hold(at(network, "a", 100.0), amount)
+    # a second step in the same direction completes the window: the whole pressure moves
+    new, moved, hold = step(space, new, target, amount=10.0 - amount, hold=hold, window=10.0)
+    assert (new, moved, hold) == (at(network, "a", 30.0), 10.0, None)
 
 
 @pytest.mark.parametrize("amount", [80.0, 80.5, 120.0, 130.0, 1e9])
@@ -151,7 +165,6 @@ def test_mid_edge_stops_on_the_junction_ahead(
     assert new == at(network, "a", float(network.length[network.edge_ids.index("a")]))
     assert moved == 80.0
     assert hold is None
-    assert space.at_junction(new)
 
 
 def test_mid_edge_leaving_by_the_twin_stops_at_the_twins_end(
@@ -328,34 +341,7 @@ def test_bad_amount_or_window(
             step(space, source, at(network, "b", 50.0), amount=amount, window=window)
 
 
-# -- junctions: at_junction and junction_ahead --------------------------------------------
-
-
-def test_at_junction_on_the_hand_made_net(network: CompiledNetwork, space: RoadSpace) -> None:
-    for edge, (_, _, length) in _EDGES.items():
-        assert space.at_junction(at(network, edge, length))  # every edge end
-        assert not space.at_junction(at(network, edge, length / 2))
-    # the start of a two-way edge is the end of its twin
-    assert space.at_junction(at(network, "b", 0.0))
-    assert space.at_junction(at(network, "nb", 0.0))
-    # the start of a one-way edge is not: a vehicle there has one way to go
-    for edge in ("a", "c", "d", "f"):
-        assert not space.at_junction(at(network, edge, 0.0))
-    with pytest.raises(InvalidInput):
-        space.at_junction(at(network, "a", 100.5))
-
-
-def test_at_junction_on_a_real_network(drt: RoadSpace) -> None:
-    net = drt.network
-    # independent twins: an edge whose reverse joins the same two junctions
-    pairs = set(zip(net.edge_from.tolist(), net.edge_to.tolist(), strict=True))
-    two_way = [(int(b), int(a)) in pairs for a, b in zip(net.edge_from, net.edge_to, strict=True)]
-    assert any(two_way) and not all(two_way)
-    for e in range(net.n_edges):
-        length = float(net.length[e])
-        assert drt.at_junction(NetPosition(e, length))
-        assert drt.at_junction(NetPosition(e, 0.0)) is two_way[e]
-        assert not drt.at_junction(NetPosition(e, length / 2))
+# -- junction_ahead --------------------------------------------
 
 
 def test_junction_ahead_on_the_hand_made_net(network: CompiledNetwork, space: RoadSpace) -> None:
@@ -418,7 +404,6 @@ def test_junction_ahead_on_random_routes(drt: RoadSpace) -> None:
         junction, cost = ahead
         assert junction == NetPosition(expected_edge, float(net.length[expected_edge]))
         assert cost == pytest.approx(expected_cost, rel=1e-12, abs=1e-9)
-        assert drt.at_junction(junction)
         # the junction lies on a shortest path to the target: its cost is the search's
         assert cost == pytest.approx(drt.path_cost(source, junction), rel=1e-9, abs=1e-6)
         if junction.edge != route[-1]:  # a junction before the target's edge

@@ -18,7 +18,7 @@ database can be reused.
 
 Usage::
 
-    python bench/http.py [--seconds 10] [--connections 16] [--rounds 5] [--probe F]
+    python bench/http_throughput.py [--seconds 10] [--connections 16] [--rounds 5] [--probe F]
                          [--postgres URL] [--quick]
 
 The fleets use the service's defaults (the backward probe on); ``--probe 0`` measures the
@@ -28,13 +28,6 @@ Prints one JSON document.
 """
 
 from __future__ import annotations
-
-import sys
-from pathlib import Path
-
-# This file is named like the standard library's ``http`` package: run as a
-# script, its folder comes first on sys.path and would shadow it.
-sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 
 import argparse
 import json
@@ -377,7 +370,7 @@ def main() -> int:
     )  # fmt: skip
     args = parser.parse_args()
     if shutil.which("wrk") is None:
-        print("bench/http.py needs wrk: apt-get install wrk", file=sys.stderr)
+        print("bench/http_throughput.py needs wrk: apt-get install wrk", file=sys.stderr)
         return 2
     if not args.net.is_file():
         print(f"network {args.net} not found", file=sys.stderr)
