@@ -1,17 +1,19 @@
-"""Consolidations of the ``consolidating`` rule: the solver against brute force, the policy,
-and a fleet on the DRT district that consolidates, replays, restores and follows a shift."""
+"""Consolidations of the ``consolidating`` rule: the solver against brute force and a hand
+computation of its cross-validated test, the policy, and a fleet on the DRT district that
+consolidates, replays, restores and follows a shift."""
 
 from __future__ import annotations
 
 import itertools
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 import pytest
 
+import routing_svc.sa.consolidation as consolidation_module
 from routing_svc.demand import DemandDistribution
 from routing_svc.demand.network import hotspot_mixture
 from routing_svc.errors import InvalidInput, ReplayMismatch, UnknownEdge
@@ -33,7 +35,7 @@ from routing_svc.sa import (
 from routing_svc.sa.consolidation import consolidate
 from routing_svc.sa.held_step import held_step
 from routing_svc.sa.requirements import build_requirement
-from routing_svc.types import FloatArray, NetPosition
+from routing_svc.types import FloatArray, IntArray, NetPosition
 
 NET = load_network(resolve_network("drt"))
 
@@ -50,16 +52,31 @@ def demand_stream(
     return demand, demand.sample(np.random.default_rng(seed), n)
 
 
+def service_costs(
+    space: RoadSpace,
+    sources: Sequence[NetPosition],
+    targets: Sequence[NetPosition],
+    power: float,
+    speed: float = 1.0,
+) -> FloatArray:
+    """``c(T) = (D / speed) ** power`` from every source to every target."""
+    return (space.cost_matrix(list(sources), list(targets)) / speed) ** power
+
+
 def sample_objective(
-    space: RoadSpace, positions: Sequence[NetPosition], targets: Sequence[NetPosition], power: float
+    space: RoadSpace,
+    positions: Sequence[NetPosition],
+    targets: Sequence[NetPosition],
+    power: float,
+    speed: float = 1.0,
 ) -> float:
-    costs = space.cost_matrix(list(positions), list(targets)) ** power
+    costs = service_costs(space, positions, targets, power, speed)
     return math.fsum(costs.min(axis=0).tolist())
 
 
 def brute_force(costs: FloatArray, p: int) -> tuple[float, tuple[int, ...]]:
     """The best ``p`` rows of ``costs`` (sum over columns of the row minimum), by enumeration."""
-    best = (math.inf, ())
+    best: tuple[float, tuple[int, ...]] = (math.inf, ())
     for rows in itertools.combinations(range(costs.shape[0]), p):
         value = math.fsum(costs[list(rows)].min(axis=0).tolist())
         if value < best[0]:
@@ -73,115 +90,371 @@ def poor_start(p: int) -> list[NetPosition]:
 
 
 def duplicated(targets: Sequence[NetPosition]) -> list[NetPosition]:
-    """z1, z1, z2, z2, ...: the fit half (even places) and the held-out half are the same."""
+    """z1, z1, z2, z2, ...: the even places and the odd places are the same targets."""
     return [z for z in targets for _ in range(2)]
+
+
+def sites_of(
+    space: RoadSpace,
+    reservoir: Sequence[NetPosition],
+    positions: Sequence[NetPosition],
+    anchor: Sequence[NetPosition],
+) -> list[NetPosition]:
+    """The candidate references a consolidation of ``reservoir`` chooses from."""
+    return space.candidate_references(list(dict.fromkeys(reservoir)), [*positions, *anchor])
+
+
+def cross_validated(
+    space: RoadSpace,
+    positions: Sequence[NetPosition],
+    reservoir: Sequence[NetPosition],
+    fitted: Mapping[int, Sequence[NetPosition]],
+    *,
+    fresh: int,
+    power: float,
+    speed: float,
+) -> tuple[float, float, int]:
+    """Gain, standard error and number of tested targets, by hand: every fresh target (the
+    last ``fresh`` places) priced from ``fitted[h]``, the references fitted on the other
+    half ``h`` (``h``: parity of the places), minus its cost from ``positions``."""
+    m = len(reservoir)
+    tested = range(m - min(fresh, m), m)
+    if not tested:
+        return 0.0, 0.0, 0
+    now = service_costs(space, positions, reservoir, power, speed).min(axis=0)
+    by_half = {
+        h: service_costs(space, fitted[h], reservoir, power, speed).min(axis=0) for h in fitted
+    }
+    differences = [float(by_half[1 - i % 2][i] - now[i]) for i in tested]
+    n = len(differences)
+    gain = math.fsum(differences) / n
+    spread = math.fsum((d - gain) ** 2 for d in differences) / n
+    return gain, math.sqrt(spread / n), n
+
+
+def half_weights(space: RoadSpace, reservoir: Sequence[NetPosition]) -> list[FloatArray]:
+    """Per half (even, odd places), the count of each distinct target, in first-seen order."""
+    column = {z: j for j, z in enumerate(dict.fromkeys(reservoir))}
+    out = []
+    for half in (0, 1):
+        weight = np.zeros(len(column))
+        for z in reservoir[half::2]:
+            weight[column[z]] += 1.0
+        out.append(weight)
+    return out
+
+
+Fits = list[tuple[FloatArray, IntArray]]
+
+
+def spy_on_fits(monkeypatch: pytest.MonkeyPatch) -> Fits:
+    """Record every ``(weight, rows)`` the solver fits, to price its challengers by hand."""
+    real: Callable[[FloatArray, FloatArray, list[IntArray]], IntArray]
+    real = consolidation_module._best_fit
+    fits: Fits = []
+
+    def recording(costs: FloatArray, weight: FloatArray, starts: list[IntArray]) -> IntArray:
+        rows = real(costs, weight, starts)
+        fits.append((weight.copy(), rows.copy()))
+        return rows
+
+    monkeypatch.setattr(consolidation_module, "_best_fit", recording)
+    return fits
+
+
+def fitted_on_halves(
+    fits: Fits, weights: list[FloatArray], sites: Sequence[NetPosition]
+) -> dict[int, list[NetPosition]]:
+    """The recorded fits of each half, as references (identified by their weights)."""
+    out: dict[int, list[NetPosition]] = {}
+    for weight, rows in fits:
+        for half in (0, 1):
+            if np.array_equal(weight, weights[half]):
+                out[half] = [sites[i] for i in rows.tolist()]
+    return out
+
+
+def no_swap_improves(costs: FloatArray, rows: Sequence[int], value: float) -> bool:
+    """Whether no single swap of one of ``rows`` for another row lowers ``value``."""
+    for k, i in itertools.product(range(len(rows)), range(costs.shape[0])):
+        swapped = [*rows[:k], i, *rows[k + 1 :]]
+        if math.fsum(costs[swapped].min(axis=0).tolist()) < value * (1 - 1e-12):
+            return False
+    return True
 
 
 # -- the solver against brute force ---------------------------------------------------
 
 
-@pytest.mark.parametrize(("p", "power"), [(1, 1.0), (1, 2.0), (2, 1.0), (3, 1.0), (2, 2.0)])
-def test_consolidation_against_brute_force(space: RoadSpace, p: int, power: float) -> None:
+@pytest.mark.parametrize(
+    ("p", "power", "speed"),
+    [(1, 1.0, 1.0), (1, 2.0, 1.0), (2, 1.0, 1.0), (3, 1.0, 1.0), (2, 2.0, 1.0), (2, 1.0, 2.5),
+     (1, 2.0, 0.5)],
+)  # fmt: skip
+def test_consolidation_against_brute_force(
+    space: RoadSpace, monkeypatch: pytest.MonkeyPatch, p: int, power: float, speed: float
+) -> None:
     _, targets = demand_stream(1, 10)
     reservoir = duplicated(targets)
+    m = len(reservoir)
     start = poor_start(p)
-    done = consolidate(space, start, start, reservoir, power=power, confidence=0.0, updates=[7] * p)
+    fits = spy_on_fits(monkeypatch)
+    done = consolidate(
+        space, start, start, reservoir, power=power, speed=speed, confidence=0.0,
+        updates=[7] * p, fresh=m,
+    )  # fmt: skip
     assert done.accepted is True
-    assert done.sample == len(reservoir)
+    assert done.sample == m
     assert len(set(done.positions)) == p
-    sites = space.candidate_references(targets, [*start, *start])
+    sites = sites_of(space, reservoir, start, start)
     assert set(done.positions) <= set(sites)
-    costs = space.cost_matrix(sites, reservoir) ** power
+    costs = service_costs(space, sites, reservoir, power, speed)
     optimum, _ = brute_force(costs, p)
-    value = sample_objective(space, done.positions, reservoir, power)
-    before = sample_objective(space, start, reservoir, power)
+    value = sample_objective(space, done.positions, reservoir, power, speed)
+    before = sample_objective(space, start, reservoir, power, speed)
     assert value < before
     assert value >= optimum * (1 - 1e-12)
     if p == 1:
         assert value == pytest.approx(optimum, rel=1e-9)
     # whatever p, no swap of one reference for another candidate does better
-    chosen = [sites.index(x) for x in done.positions]
-    for k, i in itertools.product(range(p), range(len(sites))):
-        swapped = [*chosen[:k], i, *chosen[k + 1 :]]
-        assert math.fsum(costs[swapped].min(axis=0).tolist()) >= value * (1 - 1e-12)
+    assert no_swap_improves(costs, [sites.index(x) for x in done.positions], value)
     # the step counters: the reservoir targets each new reference serves (ties: lower index)
-    served = space.cost_matrix(list(done.positions), reservoir).argmin(axis=0)
+    served = service_costs(space, done.positions, reservoir, power, speed).argmin(axis=0)
     assert done.updates == tuple(np.bincount(served, minlength=p).tolist())
-    # held-out means before and after, the odd places of the reservoir
-    held = reservoir[1::2]
-    assert done.held_out_before == pytest.approx(
-        sample_objective(space, start, held, power) / len(held), rel=1e-12
+    # the mean cost of the whole reservoir, in the fleet's time units, before and after
+    assert done.sample_before == pytest.approx(before / m, rel=1e-12)
+    assert done.sample_after == pytest.approx(value / m, rel=1e-12)
+    # the cross-validated gain: each half's fit priced on the other half's targets
+    fitted = fitted_on_halves(fits, half_weights(space, reservoir), sites)
+    assert set(fitted) == {0, 1}
+    gain, standard_error, _ = cross_validated(
+        space, start, reservoir, fitted, fresh=m, power=power, speed=speed
     )
-    assert done.held_out_after == pytest.approx(
-        sample_objective(space, done.positions, held, power) / len(held), rel=1e-12
-    )
+    assert done.gain == pytest.approx(gain, rel=1e-9)
+    assert done.standard_error == pytest.approx(standard_error, rel=1e-9, abs=1e-12 * before)
+    assert done.gain < 0.0
+    assert done.baseline == done.sample_before + done.gain
+
+
+def test_the_references_are_paired_to_the_vehicles_that_stand_on_them(space: RoadSpace) -> None:
+    # a vehicle already on a chosen site keeps it; the others take the rest in the order
+    # of the candidate list
+    _, targets = demand_stream(1, 10)
+    reservoir = duplicated(targets)
+    sites = sites_of(space, reservoir, poor_start(3), poor_start(3))
+    _, rows = brute_force(service_costs(space, sites, reservoir, 1.0), 2)
+    optimum = [sites[i] for i in rows]
+    kept = 0
+    for start in (poor_start(2), [poor_start(1)[0], optimum[1]], [optimum[1], poor_start(1)[0]]):
+        done = consolidate(
+            space, start, poor_start(3)[1:], reservoir, power=1.0, speed=1.0, confidence=0.0,
+            updates=[0, 0], fresh=len(reservoir),
+        )  # fmt: skip
+        assert done.accepted is True
+        order = sites_of(space, reservoir, start, poor_start(3)[1:])
+        moved = []
+        for before, after in zip(start, done.positions, strict=True):
+            if before in done.positions:
+                assert after == before
+                kept += 1
+            else:
+                moved.append(order.index(after))
+        assert moved == sorted(moved)
+    assert kept >= 2
+
+
+@pytest.mark.parametrize(("power", "speed"), [(1.0, 1.0), (2.0, 1.0), (1.0, 2.5), (2.0, 0.5)])
+def test_the_cross_validated_gain_by_hand(space: RoadSpace, power: float, speed: float) -> None:
+    # one vehicle, so that each half's fit is its exact 1-median over the candidates; some
+    # targets repeat, so that the weights are counts
+    _, targets = demand_stream(4, 11)
+    reservoir = [*targets, targets[2], targets[5], targets[2], targets[8], targets[0]]
+    m = len(reservoir)
+    anchor = poor_start(1)
+    full_sites = sites_of(space, reservoir, anchor, anchor)
+    full = service_costs(space, full_sites, reservoir, power, speed)
+    best_full = int(np.argmin(full.sum(axis=1)))
+    decisions = set()
+    for start in (anchor, [full_sites[best_full]], [targets[3]]):
+        sites = sites_of(space, reservoir, start, anchor)
+        costs = service_costs(space, sites, reservoir, power, speed)
+        fitted: dict[int, Sequence[NetPosition]] = {}
+        for half in (0, 1):
+            totals = costs[:, half::2].sum(axis=1)
+            best = int(np.argmin(totals))
+            # every candidate as good as the best serves every target alike (the ends of
+            # two edges into one junction): the fit's prices are those of ``best``
+            ties = np.flatnonzero(totals <= totals[best] * (1 + 1e-9))
+            for i in ties.tolist():
+                np.testing.assert_allclose(costs[i], costs[best], rtol=1e-12)
+            fitted[half] = [sites[best]]
+        for fresh in (1, 2, 5, 6, m - 1, m, m + 7):
+            gain, standard_error, n = cross_validated(
+                space, start, reservoir, fitted, fresh=fresh, power=power, speed=speed
+            )
+            assert n == min(fresh, m)
+            for confidence in (0.0, 1.0):
+                done = consolidate(
+                    space, start, anchor, reservoir, power=power, speed=speed,
+                    confidence=confidence, updates=[5], fresh=fresh,
+                )  # fmt: skip
+                scale = done.sample_before
+                assert done.gain == pytest.approx(gain, rel=1e-9, abs=1e-12 * scale)
+                assert done.standard_error == pytest.approx(
+                    standard_error, rel=1e-9, abs=1e-12 * scale
+                )
+                accepted = gain < -confidence * standard_error and gain < 0.0
+                assert done.accepted is accepted
+                decisions.add(accepted)
+                before = sample_objective(space, start, reservoir, power, speed) / m
+                assert done.sample_before == pytest.approx(before, rel=1e-12)
+                if accepted:
+                    # the whole reservoir's 1-median, which serves all of it
+                    assert done.positions[0] in full_sites
+                    assert full[full_sites.index(done.positions[0])].sum() == pytest.approx(
+                        full[best_full].sum(), rel=1e-9
+                    )
+                    assert done.updates == (m,)
+                    assert done.sample_after == pytest.approx(full[best_full].sum() / m, rel=1e-9)
+                    assert done.baseline == done.sample_before + done.gain
+                else:
+                    assert done.positions == tuple(start) and done.updates == (5,)
+                    assert done.sample_after == done.sample_before
+                    assert done.baseline == done.sample_before
+            if gain < 0.0 and standard_error > 0.0:
+                # the threshold: just under ``-gain / standard_error`` standard errors passes
+                ratio = -gain / standard_error
+                for confidence, accepted in ((0.999 * ratio, True), (1.001 * ratio, False)):
+                    done = consolidate(
+                        space, start, anchor, reservoir, power=power, speed=speed,
+                        confidence=confidence, updates=[5], fresh=fresh,
+                    )  # fmt: skip
+                    assert done.accepted is accepted
+    assert decisions == {True, False}
+
+
+def test_without_fresh_targets_nothing_is_tested(space: RoadSpace) -> None:
+    # references accepted at the last target were fitted to every target of the reservoir
+    _, reservoir = demand_stream(5, 40)
+    start = poor_start(2)
+    done = consolidate(
+        space, start, start, reservoir, power=1.0, speed=2.0, confidence=0.0,
+        updates=[3, 4], fresh=0,
+    )  # fmt: skip
+    assert done.accepted is False
+    assert done.positions == tuple(start) and done.updates == (3, 4)
+    assert done.gain == 0.0 and done.standard_error == 0.0
+    assert done.sample == len(reservoir)
+    mean = sample_objective(space, start, reservoir, 1.0, 2.0) / len(reservoir)
+    assert done.sample_before == pytest.approx(mean, rel=1e-12)
+    assert done.sample_after == done.sample_before == done.baseline
+    # the same poor references with every target fresh: a large gain, accepted
+    tested = consolidate(
+        space, start, start, reservoir, power=1.0, speed=2.0, confidence=0.0,
+        updates=[3, 4], fresh=len(reservoir),
+    )  # fmt: skip
+    assert tested.accepted is True and tested.gain < 0.0
+    assert tested.sample_before == done.sample_before
 
 
 def test_started_at_the_optimum_nothing_is_accepted(space: RoadSpace) -> None:
+    # identical halves: each half's fit is the optimum's fit, and it serves the other half
+    # no better than the optimum does
     _, targets = demand_stream(2, 12)
     reservoir = duplicated(targets)
     p = 2
-    sites = space.candidate_references(targets, [])
-    _, rows = brute_force(space.cost_matrix(sites, reservoir), p)
+    sites = sites_of(space, reservoir, poor_start(p), [])
+    costs = service_costs(space, sites, reservoir, 1.0)
+    value, rows = brute_force(costs, p)
     optimum = [sites[i] for i in rows]
+    # every configuration as good as the optimum serves each target at the same cost
+    best = costs[list(rows)].min(axis=0)
+    for other in itertools.combinations(range(len(sites)), p):
+        column = costs[list(other)].min(axis=0)
+        if math.fsum(column.tolist()) <= value * (1 + 1e-9):
+            assert np.array_equal(column, best)
     for anchor in (optimum, poor_start(p)):
-        done = consolidate(
-            space, optimum, anchor, reservoir, power=1.0, confidence=0.0, updates=[3, 4]
-        )
-        assert done.accepted is False
-        assert done.positions == tuple(optimum)
-        assert done.updates == (3, 4)
-        held = reservoir[1::2]
-        mean = sample_objective(space, optimum, held, 1.0) / len(held)
-        assert done.held_out_before == pytest.approx(mean, rel=1e-12)
-        assert done.held_out_after == done.held_out_before
+        for confidence in (0.0, 2.0):
+            done = consolidate(
+                space, optimum, anchor, reservoir, power=1.0, speed=1.0,
+                confidence=confidence, updates=[3, 4], fresh=len(reservoir),
+            )  # fmt: skip
+            assert done.accepted is False
+            assert done.positions == tuple(optimum)
+            assert done.updates == (3, 4)
+            assert done.gain >= 0.0
+            assert done.sample_before == pytest.approx(value / len(reservoir), rel=1e-12)
+            assert done.sample_after == done.sample_before == done.baseline
 
 
-def test_started_at_the_held_out_optimum_nothing_is_accepted(space: RoadSpace) -> None:
-    # distinct halves: no configuration of the candidates serves the held-out half better
-    # than its own optimum over them, whatever the fit half prefers
-    _, reservoir = demand_stream(3, 24)
-    fit, held = reservoir[0::2], reservoir[1::2]
-    sites = space.candidate_references(fit, [])
-    _, rows = brute_force(space.cost_matrix(sites, held), 2)
-    best_held = [sites[i] for i in rows]
-    for confidence in (0.0, 1.0):
-        done = consolidate(
-            space, best_held, best_held, reservoir, power=1.0, confidence=confidence, updates=[1, 2]
-        )
-        assert done.accepted is False
-        assert done.positions == tuple(best_held) and done.updates == (1, 2)
-
-
-def test_held_out_before_is_the_cost_of_the_references_even_when_two_coincide(
-    space: RoadSpace,
+def test_coinciding_references_are_priced_from_their_actual_place(
+    space: RoadSpace, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    # three vehicles waiting at one depot: the held-out cost "from the references before"
-    # is the cost from that one place
+    # three vehicles waiting at one depot: the cost "from the references before" is the cost
+    # from that one place, in the sample mean and in every tested difference
     _, targets = demand_stream(1, 10)
     reservoir = duplicated(targets)
+    m = len(reservoir)
     depot = [NetPosition(5, 0.0)] * 3
-    done = consolidate(space, depot, depot, reservoir, power=1.0, confidence=1e9, updates=[0] * 3)
-    held = reservoir[1::2]
+    fits = spy_on_fits(monkeypatch)
+    done = consolidate(
+        space, depot, depot, reservoir, power=1.0, speed=1.0, confidence=1e9,
+        updates=[0] * 3, fresh=m,
+    )  # fmt: skip
     assert done.accepted is False
-    assert done.held_out_before == pytest.approx(
-        sample_objective(space, depot[:1], held, 1.0) / len(held), rel=1e-12
+    assert done.positions == tuple(depot)
+    one_place = sample_objective(space, depot[:1], reservoir, 1.0) / m
+    assert done.sample_before == pytest.approx(one_place, rel=1e-12)
+    assert done.sample_after == done.sample_before
+    sites = sites_of(space, reservoir, depot, depot)
+    fitted = fitted_on_halves(fits, half_weights(space, reservoir), sites)
+    gain, standard_error, _ = cross_validated(
+        space, depot, reservoir, fitted, fresh=m, power=1.0, speed=1.0
     )
+    assert done.gain == pytest.approx(gain, rel=1e-9)
+    assert done.standard_error == pytest.approx(standard_error, rel=1e-9)
+    # without a confidence to meet, the refit moves them apart
+    moved = consolidate(
+        space, depot, depot, reservoir, power=1.0, speed=1.0, confidence=0.0,
+        updates=[0] * 3, fresh=m,
+    )  # fmt: skip
+    assert moved.accepted is True and len(set(moved.positions)) == 3
+    assert moved.sample_before == done.sample_before
+    assert moved.sample_after < moved.sample_before
 
 
 def test_consolidate_is_deterministic_and_its_record_round_trips(space: RoadSpace) -> None:
     _, reservoir = demand_stream(5, 60)
     start = poor_start(3)
-    first = consolidate(space, start, start, reservoir, power=1.0, confidence=1.0, updates=[0] * 3)
-    again = consolidate(space, start, start, reservoir, power=1.0, confidence=1.0, updates=[0] * 3)
-    assert first == again
+
+    def solve() -> Consolidation[NetPosition]:
+        return consolidate(
+            space, start, start, reservoir, power=1.0, speed=1.0, confidence=1.0,
+            updates=[0] * 3, fresh=45,
+        )  # fmt: skip
+
+    first = solve()
+    assert solve() == first
     assert first.accepted is True
+    assert first.standard_error > 0.0
     text = json.dumps(first.to_dict(space.encode))
     back = Consolidation.from_dict(json.loads(text), space.decode)
     assert back == first
     assert json.dumps(back.to_dict(space.encode)) == text
-    assert back.held_out_before == first.held_out_before  # floats exact
-    assert back.held_out_after == first.held_out_after
+    for name in ("sample_before", "sample_after", "gain", "standard_error"):
+        assert getattr(back, name) == getattr(first, name)  # floats exact
+    assert back.baseline == first.baseline
+
+
+def record() -> Consolidation[NetPosition]:
+    return Consolidation(True, (NetPosition(1, 0.0),), (4,), 8, 10.5, 9.25, -1.25, 0.5)
+
+
+def test_the_baseline_of_a_record() -> None:
+    kept = record()
+    assert kept.baseline == 10.5 - 1.25
+    assert Consolidation(False, kept.positions, (4,), 8, 10.5, 10.5, -1.25, 0.5).baseline == 10.5
+    assert Consolidation(True, kept.positions, (4,), 8, 10.5, 9.0, 0.75, 0.5).baseline == 10.5
 
 
 @pytest.mark.parametrize(
@@ -189,42 +462,51 @@ def test_consolidate_is_deterministic_and_its_record_round_trips(space: RoadSpac
     [
         "drop:accepted",
         "drop:positions",
-        "drop:held_out_after",
+        "drop:updates",
+        "drop:sample",
+        "drop:sample_before",
+        "drop:sample_after",
+        "drop:gain",
+        "drop:standard_error",
         {"positions": 3},
         {"positions": [{"edge": NET.edge_ids[0], "offset": -1.0}]},
         {"updates": ["x"]},
         {"updates": None},
         {"sample": "many"},
-        {"held_out_before": "low"},
-        {"held_out_after": None},
+        {"sample_before": "low"},
+        {"sample_after": None},
+        {"gain": "better"},
+        {"standard_error": None},
+        {"standard_error": [0.5]},
     ],
 )
 def test_a_malformed_record_is_invalid_input(space: RoadSpace, change: Any) -> None:
-    record = Consolidation(True, (NetPosition(1, 0.0),), (4,), 8, 10.5, 9.25).to_dict(space.encode)
+    data = record().to_dict(space.encode)
     if isinstance(change, str):
-        del record[change.removeprefix("drop:")]
+        del data[change.removeprefix("drop:")]
     else:
-        record.update(change)
+        data.update(change)
     with pytest.raises(InvalidInput):
-        Consolidation.from_dict(record, space.decode)
+        Consolidation.from_dict(data, space.decode)
 
 
 def test_a_record_on_an_unknown_edge_is_not_found(space: RoadSpace) -> None:
-    record = Consolidation(True, (NetPosition(1, 0.0),), (4,), 8, 10.5, 9.25).to_dict(space.encode)
-    record["positions"] = [{"edge": "no-such-edge", "offset": 0.0}]
+    data = record().to_dict(space.encode)
+    data["positions"] = [{"edge": "no-such-edge", "offset": 0.0}]
     with pytest.raises(UnknownEdge):
-        Consolidation.from_dict(record, space.decode)
+        Consolidation.from_dict(data, space.decode)
 
 
 def test_consolidate_rejects_mismatched_inputs(space: RoadSpace) -> None:
     _, reservoir = demand_stream(6, 10)
     start = poor_start(2)
+    common: dict[str, Any] = {"power": 1.0, "speed": 1.0, "confidence": 0.0, "fresh": 10}
     with pytest.raises(InvalidInput):
-        consolidate(space, start, start, reservoir[:1], power=1.0, confidence=0.0, updates=[0, 0])
+        consolidate(space, start, start, reservoir[:1], updates=[0, 0], **common)
     with pytest.raises(InvalidInput):
-        consolidate(space, start, start[:1], reservoir, power=1.0, confidence=0.0, updates=[0, 0])
+        consolidate(space, start, start[:1], reservoir, updates=[0, 0], **common)
     with pytest.raises(InvalidInput):
-        consolidate(space, start, start, reservoir, power=1.0, confidence=0.0, updates=[0])
+        consolidate(space, start, start, reservoir, updates=[0], **common)
 
 
 # -- the policy -------------------------------------------------------------------------
@@ -330,17 +612,24 @@ def consolidating_fleet(
 CALM = ConsolidationPolicy(shift_ratio=1e9)  # the shift test never fires
 
 
+def test_policy_defaults() -> None:
+    policy = ConsolidationPolicy()
+    assert (policy.reservoir, policy.first, policy.longest, policy.block) == (4000, 250, 8000, 250)
+    assert (policy.growth, policy.confidence, policy.shift_ratio) == (1.5, 0.0, 1.5)
+
+
+Run = tuple[list[NetPosition], Fleet[NetPosition], list[Any]]
+
+
 @pytest.fixture(scope="module")
-def calm_run(space: RoadSpace) -> tuple[list[NetPosition], Fleet[NetPosition], list[Any]]:
+def calm_run(space: RoadSpace) -> Run:
     _, stream = demand_stream(7, 3000)
     fleet = consolidating_fleet(space, policy=CALM)
     outcomes = [fleet.observe(z) for z in stream]
     return stream, fleet, outcomes
 
 
-def test_consolidations_happen_on_the_schedule(
-    calm_run: tuple[list[NetPosition], Fleet[NetPosition], list[Any]],
-) -> None:
+def test_consolidations_happen_on_the_schedule(calm_run: Run) -> None:
     _, fleet, outcomes = calm_run
     assert fleet.config.rule is Rule.CONSOLIDATING
     done = [o.index + 1 for o in outcomes if o.consolidation is not None]
@@ -351,32 +640,72 @@ def test_consolidations_happen_on_the_schedule(
     assert learning is not None and learning.epoch == 0
     assert learning.next_consolidation == 3798
     assert len(learning.reservoir) == 3000
+    last = max(o.index + 1 for o in outcomes if o.consolidation and o.consolidation.accepted)
+    assert learning.accepted_at == last
 
 
-def test_a_consolidation_is_applied_after_the_step(
-    calm_run: tuple[list[NetPosition], Fleet[NetPosition], list[Any]], space: RoadSpace
+def test_each_consolidation_tests_the_targets_since_the_last_acceptance(
+    calm_run: Run, space: RoadSpace, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    stream, _, outcomes = calm_run
+    calls: list[dict[str, Any]] = []
+
+    def recording(
+        space_: Any, positions: Any, anchor: Any, reservoir: Any, **kw: Any
+    ) -> Consolidation[NetPosition]:
+        copies = {"positions": list(positions), "anchor": list(anchor)}
+        calls.append(kw | copies | {"reservoir": list(reservoir), "updates": list(kw["updates"])})
+        return consolidate(space_, positions, anchor, reservoir, **kw)
+
+    monkeypatch.setattr("routing_svc.sa.fleet.consolidate", recording)
+    fleet = consolidating_fleet(space, policy=CALM)
+    starts = list(fleet.state.positions)
+    for z, out in zip(stream, outcomes, strict=True):
+        assert fleet.observe(z) == out
+    records = [(o.index + 1, o.consolidation) for o in outcomes if o.consolidation is not None]
+    assert len(calls) == len(records)
+    accepted_at, anchor = 0, starts
+    for call, (count, done) in zip(calls, records, strict=True):
+        assert call["fresh"] == count - accepted_at
+        assert call["reservoir"] == stream[:count]
+        assert call["anchor"] == anchor
+        assert (call["power"], call["speed"], call["confidence"]) == (1.0, 1.0, CALM.confidence)
+        if done.accepted:
+            accepted_at, anchor = count, list(done.positions)
+        else:
+            assert done.positions == tuple(call["positions"])
+            assert list(done.updates) == call["updates"]
+
+
+def test_a_consolidation_is_applied_after_the_step(calm_run: Run, space: RoadSpace) -> None:
     stream, _, outcomes = calm_run
     k = next(o.index for o in outcomes if o.consolidation is not None and o.consolidation.accepted)
     fleet = consolidating_fleet(space, policy=CALM)
     for z in stream[:k]:
         fleet.observe(z)
     out = fleet.observe(stream[k])
-    assert out.consolidation == outcomes[k].consolidation
-    assert fleet.state.positions == list(out.consolidation.positions)
-    assert fleet.state.updates == list(out.consolidation.updates)
+    done = out.consolidation
+    assert done is not None and done == outcomes[k].consolidation
+    assert fleet.state.positions == list(done.positions)
+    assert fleet.state.updates == list(done.updates)
     learning = fleet.state.learning
-    assert learning.anchor == list(out.consolidation.positions)
+    assert learning is not None
+    assert learning.anchor == list(done.positions)
     assert learning.holds == [None] * 4
-    assert learning.baseline == out.consolidation.held_out_after
+    assert learning.accepted_at == k + 1
+    assert learning.baseline == done.baseline == done.sample_before + min(done.gain, 0.0)
     # the reservoir counts every target so far; the updates count what each reference serves
-    assert sum(out.consolidation.updates) == k + 1
+    assert done.sample == k + 1
+    assert sum(done.updates) == k + 1
+    served = space.cost_matrix(list(done.positions), stream[: k + 1]).argmin(axis=0)
+    assert done.updates == tuple(np.bincount(served, minlength=4).tolist())
+    # the mean cost of the reservoir from the references afterwards
+    after = sample_objective(space, done.positions, stream[: k + 1], 1.0) / (k + 1)
+    assert done.sample_after == pytest.approx(after, rel=1e-12)
 
 
 def test_replay_applies_the_recorded_consolidations_without_solving(
-    calm_run: tuple[list[NetPosition], Fleet[NetPosition], list[Any]],
-    space: RoadSpace,
-    monkeypatch: pytest.MonkeyPatch,
+    calm_run: Run, space: RoadSpace, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     stream, fleet, outcomes = calm_run
 
@@ -386,16 +715,18 @@ def test_replay_applies_the_recorded_consolidations_without_solving(
     monkeypatch.setattr("routing_svc.sa.fleet.consolidate", no_solving)
     replayed = consolidating_fleet(space, policy=CALM)
     for z, out in zip(stream, outcomes, strict=True):
-        again = replayed.replay_observe(z, None, out.consolidation)
+        recorded = out.consolidation
+        if recorded is not None:  # as stored
+            data = json.loads(json.dumps(recorded.to_dict(space.encode)))
+            recorded = Consolidation.from_dict(data, space.decode)
+        again = replayed.replay_observe(z, None, recorded)
         assert again == out
     assert replayed.state.positions == fleet.state.positions
     assert replayed.state.updates == fleet.state.updates
     assert json.dumps(replayed.snapshot()) == json.dumps(fleet.snapshot())
 
 
-def test_replay_rejects_a_consolidation_where_none_is_due(
-    calm_run: tuple[list[NetPosition], Fleet[NetPosition], list[Any]], space: RoadSpace
-) -> None:
+def test_replay_rejects_a_consolidation_where_none_is_due(calm_run: Run, space: RoadSpace) -> None:
     stream, _, outcomes = calm_run
     recorded = next(o.consolidation for o in outcomes if o.consolidation is not None)
     replayed = consolidating_fleet(space, policy=CALM)
@@ -405,7 +736,9 @@ def test_replay_rejects_a_consolidation_where_none_is_due(
     fleet = consolidating_fleet(space, policy=CALM)
     for z in stream[:249]:
         fleet.observe(z)
-    wrong = Consolidation(True, recorded.positions[:2], recorded.updates[:2], 250, 1.0, 1.0)
+    wrong = Consolidation(
+        True, recorded.positions[:2], recorded.updates[:2], 250, 1.0, 1.0, -0.5, 0.1
+    )
     with pytest.raises(ReplayMismatch):
         fleet.replay_observe(stream[249], None, wrong)
     # a fleet of the paper's rule makes none
@@ -421,15 +754,19 @@ def test_replay_rejects_a_consolidation_where_none_is_due(
 
 
 def test_snapshot_restore_continue_is_the_same_as_continuing(
-    calm_run: tuple[list[NetPosition], Fleet[NetPosition], list[Any]], space: RoadSpace
+    calm_run: Run, space: RoadSpace
 ) -> None:
     stream, fleet, outcomes = calm_run
     cut = 1111  # mid-block, between two consolidations
     first = consolidating_fleet(space, policy=CALM)
     for z in stream[:cut]:
         first.observe(z)
-    assert any(h is not None for h in first.state.learning.holds)
+    learning = first.state.learning
+    assert learning is not None
+    assert any(h is not None for h in learning.holds)
     saved = json.loads(json.dumps(first.snapshot()))
+    assert saved["learning"]["accepted_at"] == learning.accepted_at
+    assert saved["learning"]["baseline"] == learning.baseline
     restored = consolidating_fleet(space, policy=CALM)
     restored.restore(saved)
     assert json.dumps(restored.snapshot()) == json.dumps(saved)
@@ -442,19 +779,53 @@ def test_snapshot_restore_continue_is_the_same_as_continuing(
         consolidating_fleet(space, policy=CALM).restore(bare)
 
 
+def block_means(outcomes: Sequence[Any], block: int) -> list[tuple[int, float]]:
+    """``(target count, mean service cost)`` of every full block of targets."""
+    costs = [o.dispatch.objective for o in outcomes]
+    return [
+        (end, math.fsum(costs[end - block : end]) / block)
+        for end in range(block, len(costs) + 1, block)
+    ]
+
+
+def first_shift(outcomes: Sequence[Any], policy: ConsolidationPolicy) -> int | None:
+    """The first block end whose mean cost exceeds ``shift_ratio`` times the baseline of the
+    last consolidation before it, from the outcomes alone."""
+    baselines = {o.index + 1: o.consolidation.baseline for o in outcomes if o.consolidation}
+    for end, mean in block_means(outcomes, policy.block):
+        earlier = [count for count in baselines if count < end]
+        if earlier and mean > policy.shift_ratio * baselines[max(earlier)]:
+            return end
+    return None
+
+
 def test_identical_vehicles_consolidate_on_the_schedule_whatever_their_common_speed(
     space: RoadSpace,
 ) -> None:
     # a stationary demand, the default shift test: scaling every speed by one factor
-    # changes the waiting times, not which demand moved
+    # changes the waiting times, not which demand moved (the block costs and the baseline
+    # are in the same units)
     _, stream = demand_stream(7, 3000)
-    expected = schedule(ConsolidationPolicy(), start=250, epoch=0, until=3000)
+    policy = ConsolidationPolicy()
+    expected = schedule(policy, start=250, epoch=0, until=3000)
     for speed in (1.0, 0.5):
         fleet = consolidating_fleet(
             space, vehicles=[Vehicle(f"v{i}", speed=speed) for i in range(4)]
         )
-        done = [o.index + 1 for o in map(fleet.observe, stream) if o.consolidation is not None]
+        outcomes = [fleet.observe(z) for z in stream]
+        done = [o.index + 1 for o in outcomes if o.consolidation is not None]
         assert done == expected, speed
+        assert first_shift(outcomes, policy) is None
+        learning = fleet.state.learning
+        assert learning is not None and learning.epoch == 0
+        # the last consolidation's sample cost is in waiting times D / speed
+        last = next(o for o in reversed(outcomes) if o.consolidation is not None)
+        assert last.consolidation is not None
+        reservoir = stream[: last.index + 1]
+        positions = last.consolidation.positions if last.consolidation.accepted else None
+        if positions is not None:
+            mean = sample_objective(space, positions, reservoir, 1.0, speed) / len(reservoir)
+            assert last.consolidation.sample_after == pytest.approx(mean, rel=1e-12)
 
 
 def test_a_shift_of_the_demand_starts_a_new_epoch(space: RoadSpace) -> None:
@@ -471,15 +842,24 @@ def test_a_shift_of_the_demand_starts_a_new_epoch(space: RoadSpace) -> None:
     # the noise of a 250-target block of the stationary demand stays well below it
     policy = ConsolidationPolicy(shift_ratio=2.0)
     fleet = consolidating_fleet(space, policy=policy)
-    done = [o.index + 1 for o in map(fleet.observe, west_targets) if o.consolidation is not None]
+    west = [fleet.observe(z) for z in west_targets]
+    done = [o.index + 1 for o in west if o.consolidation is not None]
     assert done == schedule(policy, start=policy.first, epoch=0, until=2000)
-    assert fleet.state.learning.epoch == 0
+    learning = fleet.state.learning
+    assert learning is not None and learning.epoch == 0
+    assert first_shift(west, policy) is None
     at_shift = list(fleet.state.positions)
-    done = [o.index + 1 for o in map(fleet.observe, east_targets) if o.consolidation is not None]
-    # the block of targets 2001..2250 costs far more than the references' held-out cost:
-    # a new epoch at 2250, its first consolidation ``first`` targets later (not at 2532)
-    assert fleet.state.learning.epoch == 2250
+    outcomes = [*west, *(fleet.observe(z) for z in east_targets)]
+    done = [o.index + 1 for o in outcomes[2000:] if o.consolidation is not None]
+    # the block of targets 2001..2250 costs far more than the baseline of the last
+    # consolidation: a new epoch at 2250, its first consolidation ``first`` targets later
+    # (not at 2532), on a reservoir of that block and the targets after it
+    assert first_shift(outcomes, policy) == 2250
+    learning = fleet.state.learning
+    assert learning is not None and learning.epoch == 2250
     assert done == schedule(policy, start=2250 + policy.first, epoch=2250, until=6000)
+    first_after = next(o.consolidation for o in outcomes[2250:] if o.consolidation is not None)
+    assert first_after is not None and first_after.sample == policy.block + policy.first
     speeds = [1.0] * 4
     before = expected_cost(space, at_shift, speeds, east)
     after = expected_cost(space, fleet.state.positions, speeds, east)
@@ -501,6 +881,7 @@ def test_mixed_types_or_speeds_never_consolidate_but_hold(space: RoadSpace) -> N
         held = 0
         for z in stream:
             state, learning = fleet.state, fleet.state.learning
+            assert learning is not None
             found = space.assign(z, state.positions, speeds, anyone)
             mover = found.mover
             amount = fleet.config.objective.step_amount(
@@ -514,10 +895,12 @@ def test_mixed_types_or_speeds_never_consolidate_but_hold(space: RoadSpace) -> N
             assert out.consolidation is None
             assert out.dispatch.moved == fleet.vehicles[mover].id
             assert (out.new_position, out.moved_by) == expected[:2]
-            assert fleet.state.learning.holds[mover] == expected[2]
+            assert learning.holds[mover] == expected[2]
             held += expected[2] is not None and out.moved_by == 0.0 and amount > 0.0
-        assert held > 0  # some steps were held on a junction
+        assert held > 0  # some steps were held until the pressure reached the window
+        assert fleet.state.learning is not None
         assert len(fleet.state.learning.reservoir) == 0
+        assert fleet.state.learning.baseline is None
 
 
 def test_coverage_objective_consolidates_too(space: RoadSpace) -> None:
@@ -525,13 +908,15 @@ def test_coverage_objective_consolidates_too(space: RoadSpace) -> None:
     fleet = consolidating_fleet(space, power=2.0, policy=CALM)
     outcomes = [fleet.observe(z) for z in stream]
     assert [o.index + 1 for o in outcomes if o.consolidation is not None] == [250]
-    record = outcomes[-1].consolidation
-    held = stream[1::2]
-    assert record.held_out_after == pytest.approx(
-        sample_objective(space, fleet.state.positions, held, 2.0) / len(held), rel=1e-12
-    )
-    if not record.accepted:
-        assert record.held_out_after == record.held_out_before
+    done = outcomes[-1].consolidation
+    assert done is not None and done.sample == 250
+    # the first consolidation: every target is fresh, the whole reservoir is priced
+    mean = sample_objective(space, fleet.state.positions, stream, 2.0) / len(stream)
+    assert done.sample_after == pytest.approx(mean, rel=1e-12)
+    if done.accepted:
+        assert done.gain < 0.0
+    else:
+        assert done.sample_after == done.sample_before
 
 
 # -- stored configs ------------------------------------------------------------------
