@@ -10,7 +10,8 @@ reservoir of its most recent targets ``z_1 .. z_m``:
 
 objective (11) of Le Ny & Pappas on the empirical distribution, over the
 candidate references of the sample (its targets and the ends of their edges,
-Hakimi's finite dominating set) by greedy addition and Whitaker's fast
+Hakimi's finite dominating set; at most :data:`MAX_SITE_TARGETS` of its targets)
+by greedy addition and Whitaker's fast
 interchange (:mod:`routing_svc.sa.interchange`), started from the current
 references, from the last accepted ones and from scratch.
 
@@ -53,6 +54,11 @@ from routing_svc.errors import InvalidInput
 from routing_svc.sa.interchange import fast_interchange, greedy
 from routing_svc.sa.space import P
 from routing_svc.types import FloatArray, IntArray
+
+MAX_SITE_TARGETS = 600
+"""Reservoir targets offered as candidate references (with the ends of their edges);
+beyond, an evenly spaced subset of the distinct targets, so that a consolidation's cost
+is bounded whatever the spread of the demand."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -262,7 +268,8 @@ def consolidate(
         ).astype(np.float64)
         for half in (0, 1)
     ]
-    sites = space.candidate_references(targets, [*positions, *anchor])
+    stride = -(-len(targets) // MAX_SITE_TARGETS)
+    sites = space.candidate_references(targets[::stride], [*positions, *anchor])
     row = {s: i for i, s in enumerate(sites)}
     costs = (np.asarray(space.cost_matrix(sites, targets), dtype=np.float64) / speed) ** power
     actual = np.array([row[x] for x in positions], dtype=np.int64)
@@ -325,7 +332,10 @@ def _distinct(rows: IntArray, n_sites: int) -> IntArray:
 def _best_fit(costs: FloatArray, weight: FloatArray, starts: list[IntArray]) -> IntArray:
     """The best local optimum for ``weight`` from each start and from greedy addition."""
     p = starts[0].size
-    candidates = [fast_interchange(costs, weight, s) for s in starts]
+    distinct = [
+        s for k, s in enumerate(starts) if not any(np.array_equal(s, t) for t in starts[:k])
+    ]
+    candidates = [fast_interchange(costs, weight, s) for s in distinct]
     candidates.append(fast_interchange(costs, weight, greedy(costs, weight, p)))
     values = [_total(costs, weight, c) for c in candidates]
     return candidates[int(np.argmin(values))]

@@ -33,7 +33,7 @@ from tests.reliability.workload import fleet_body, target_stream
 
 REQUEST_S = 1.5
 HEALTH_S = 1.0
-SLACK_S = 1.0  # scheduling on two shared cores, process start-up of nothing: answers only
+SLACK_S = 2.0  # scheduling on two shared cores, process start-up of nothing: answers only
 BOUNDS = (
     "--request-timeout-s", str(REQUEST_S), "--health-timeout-s", str(HEALTH_S),
     "--retry-after-s", "1", "--db-connect-timeout-s", "2", "--db-pool-timeout-s", "1",

@@ -957,3 +957,28 @@ def test_a_consolidating_config_round_trips(space: RoadSpace) -> None:
             "consolidating", typical_cost=100.0, n_vehicles=4, objective=ROUTING,
             annealing=None, probe=0.1,
         )  # fmt: skip
+
+
+def test_a_wide_reservoir_offers_an_evenly_spaced_subset_of_its_targets(
+    space: RoadSpace, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    offered: list[list[NetPosition]] = []
+    original = space.candidate_references
+
+    def recording(sample: Sequence[NetPosition], fixed: Sequence[NetPosition]) -> list[NetPosition]:
+        offered.append(list(sample))
+        return original(sample, fixed)
+
+    monkeypatch.setattr(space, "candidate_references", recording)
+    monkeypatch.setattr(consolidation_module, "MAX_SITE_TARGETS", 7)
+    _, reservoir = demand_stream(31, 40)
+    distinct = list(dict.fromkeys(reservoir))
+    assert len(distinct) > 21
+    start = poor_start(2)
+    consolidate(
+        space, start, start, reservoir, power=1.0, speed=1.0, confidence=0.0,
+        updates=[0, 0], fresh=len(reservoir),
+    )  # fmt: skip
+    stride = -(-len(distinct) // 7)
+    assert offered == [distinct[::stride]]
+    assert len(offered[0]) <= 7

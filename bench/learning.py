@@ -1,0 +1,485 @@
+"""Learning curves of every rule on every network, against the optimum and the batch answer.
+
+For each network, fleet size and seed: a hotspot demand (three hotspots, drawn
+from the seed) and its best p-median (the *optimum*); then, for each rule, the
+exact expected cost of the fleet after 300, 1,000, 3,000, 10,000 and 30,000
+targets as a gap to the optimum, from three starts:
+
+- ``cold``: random positions;
+- ``warm``: at the optimum's sites, with fresh step counters (a fleet created at
+  good positions);
+- ``shift``: cold, and after 10,000 targets the hotspots move; gaps to the new
+  demand's optimum 1,000 and 5,000 targets later.
+
+In the same run the *anchor*, the p-median of every target seen so far (the
+batch answer), is evaluated at the same checkpoints, and each rule's compute per
+target is measured against ``probe``, the rule whose compiled update served
+every fleet before (the named baseline). Medians over seeds; the worst network
+counts. ``--rest`` adds one curve through the REST API of a live
+``routing-svc serve`` (``targets:batch``).
+
+Run: ``python bench/learning.py`` (everything; long) or, e.g.,
+``python bench/learning.py --nets drt,bologna --seeds 0,1 --targets 10000``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections import Counter
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from routing_svc.demand import DemandDistribution
+from routing_svc.demand.network import hotspot_mixture
+from routing_svc.nets import resolve_network
+from routing_svc.network import RoadSpace, load_network
+from routing_svc.optimum import candidate_sites, expected_cost, solve_pmedian
+from routing_svc.sa import Fleet, Objective, Rule, Vehicle, learning_config
+from routing_svc.types import FloatArray, NetPosition
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "nets"
+NETWORKS = {
+    "drt": "drt",
+    "bs3d": "bs3d",
+    "badhersfeld": str(SHARED / "badhersfeld.net.xml.gz"),
+    "bologna": str(SHARED / "bologna.net.xml.gz"),
+    "grid": "grid",
+    "spider": "spider",
+    "oneway": "oneway",
+}
+CHECKPOINTS = (300, 1000, 3000, 10000, 30000)
+SHIFT_AT = 10000
+AFTER_SHIFT = (1000, 5000)
+MAX_SITES = 1500
+GOALS: dict[str, Any] = {
+    "cold": {"3000": 0.05, "30000": 0.02},
+    "warm_every": 0.05,
+    "warm_from_3000": 0.015,
+    "shift_5000": 0.05,
+    "anchor_points": 0.01,
+    "compute_ratio": 2.0,
+}
+
+
+@dataclass(frozen=True)
+class Instance:
+    """A network, its demand (and the shifted one), their optima and a random start."""
+
+    space: RoadSpace
+    demand: DemandDistribution[NetPosition]
+    shifted: DemandDistribution[NetPosition]
+    optimum: tuple[float, list[NetPosition]]
+    shifted_optimum: tuple[float, list[NetPosition]]
+    matrix: FloatArray
+    shifted_matrix: FloatArray
+    sites: list[NetPosition]
+    shifted_sites: list[NetPosition]
+    random_start: list[NetPosition]
+
+
+def optimum_of(
+    space: RoadSpace, demand: DemandDistribution[NetPosition], n: int
+) -> tuple[tuple[float, list[NetPosition]], FloatArray, list[NetPosition]]:
+    sites = candidate_sites(space.network, demand, max_sites=MAX_SITES)
+    matrix = space.cost_matrix(sites, list(demand.positions))
+    solution = solve_pmedian(matrix, np.asarray(demand.weights), n)
+    return (solution.objective, [sites[i] for i in solution.sites]), matrix, sites
+
+
+def instance(net: str, n: int, seed: int) -> Instance:
+    network = load_network(resolve_network(NETWORKS[net]))
+    space = RoadSpace(network)
+    demand = hotspot_mixture(network, centres=3, rng=np.random.default_rng([seed, 0]))
+    shifted = hotspot_mixture(network, centres=3, rng=np.random.default_rng([seed, 2]))
+    optimum, matrix, sites = optimum_of(space, demand, n)
+    shifted_optimum, shifted_matrix, shifted_sites = optimum_of(space, shifted, n)
+    edges = np.random.default_rng([seed, 3]).choice(network.n_edges, size=n, replace=False)
+    start = [NetPosition(int(e), 0.0) for e in edges]
+    return Instance(
+        space,
+        demand,
+        shifted,
+        optimum,
+        shifted_optimum,
+        matrix,
+        shifted_matrix,
+        sites,
+        shifted_sites,
+        start,
+    )
+
+
+def gap(space: RoadSpace, positions: list[NetPosition], demand: Any, optimum: float) -> float:
+    value = expected_cost(space, positions, np.ones(len(positions)), demand)
+    return (value - optimum) / optimum
+
+
+def run_rule(
+    inst: Instance, rule: str, scenario: str, n: int, seed: int, targets: int
+) -> dict[str, Any]:
+    """One fleet of ``rule`` from ``scenario``'s start; its gaps at the checkpoints."""
+    space = inst.space
+    config = learning_config(
+        rule, typical_cost=space.typical_cost(), n_vehicles=n, objective=Objective(1.0), seed=seed
+    )
+    start = inst.optimum[1] if scenario == "warm" else inst.random_start
+    fleet = Fleet.create(space, [(Vehicle(f"v{i:03d}"), p) for i, p in enumerate(start)], config)
+    rng = np.random.default_rng([seed, 1])
+    if scenario == "shift":
+        stream = inst.demand.sample(rng, SHIFT_AT) + inst.shifted.sample(rng, max(AFTER_SHIFT))
+        marks = {SHIFT_AT + k: f"+{k}" for k in AFTER_SHIFT}
+    else:
+        stream = inst.demand.sample(rng, targets)
+        marks = {k: str(k) for k in CHECKPOINTS if k <= targets}
+    gaps: dict[str, float] = {}
+    seconds = consolidating = 0.0
+    made = accepted = 0
+    fleet.observe(stream[0])  # compiles the kernels once, outside the timing
+    for k, z in enumerate(stream[1:], start=2):
+        t0 = time.perf_counter()
+        outcome = fleet.observe(z)
+        spent = time.perf_counter() - t0
+        seconds += spent
+        if outcome.consolidation is not None:
+            consolidating += spent
+            made += 1
+            accepted += outcome.consolidation.accepted
+        if k in marks:
+            after = scenario == "shift"
+            demand = inst.shifted if after else inst.demand
+            optimum = inst.shifted_optimum[0] if after else inst.optimum[0]
+            gaps[marks[k]] = gap(space, fleet.state.positions, demand, optimum)
+    served = max(len(stream) - 1, 1)
+    return {
+        "gaps": gaps,
+        "microseconds_per_target": 1e6 * seconds / served,
+        "step_microseconds_per_target": 1e6 * (seconds - consolidating) / max(served - made, 1),
+        "consolidations": made,
+        "accepted": accepted,
+        "consolidation_seconds": consolidating,
+    }
+
+
+def anchor_gaps(inst: Instance, n: int, seed: int, targets: int) -> dict[str, dict[str, float]]:
+    """The batch answer (p-median of all targets so far) at the checkpoints of each stream."""
+    rng = np.random.default_rng([seed, 1])
+    out: dict[str, dict[str, float]] = {"cold": {}, "shift": {}}
+    stream = inst.demand.sample(rng, targets)
+    rng = np.random.default_rng([seed, 1])
+    shift_stream = inst.demand.sample(rng, SHIFT_AT) + inst.shifted.sample(rng, max(AFTER_SHIFT))
+    for name, marks, seq, sites, matrix, demand, optimum in (
+        (
+            "cold",
+            {k: str(k) for k in CHECKPOINTS if k <= targets},
+            stream,
+            inst.sites,
+            inst.matrix,
+            inst.demand,
+            inst.optimum[0],
+        ),
+        (
+            "shift",
+            {SHIFT_AT + k: f"+{k}" for k in AFTER_SHIFT},
+            shift_stream,
+            inst.shifted_sites,
+            inst.shifted_matrix,
+            inst.shifted,
+            inst.shifted_optimum[0],
+        ),
+    ):
+        index = {z: j for j, z in enumerate(demand.positions)}
+        for k, label in marks.items():
+            counts = Counter(seq[:k])
+            seen = list(counts)
+            weights = np.array([counts[z] for z in seen], dtype=np.float64)
+            if all(z in index for z in seen):
+                costs = matrix[:, np.array([index[z] for z in seen])]
+            else:  # targets of the demand before the shift: priced from the same sites
+                costs = inst.space.cost_matrix(sites, seen)
+            solution = solve_pmedian(costs, weights, n, method="heuristic")
+            positions = [sites[i] for i in solution.sites]
+            out[name][label] = gap(inst.space, positions, demand, optimum)
+    return out
+
+
+def job(args: tuple[str, int, int, tuple[str, ...], tuple[str, ...], int]) -> dict[str, Any]:
+    net, n, seed, rules, scenarios, targets = args
+    t0 = time.perf_counter()
+    inst = instance(net, n, seed)
+    record: dict[str, Any] = {
+        "network": net,
+        "vehicles": n,
+        "seed": seed,
+        "edges": inst.space.network.n_edges,
+        "atoms": len(inst.demand.positions),
+        "optimum": inst.optimum[0],
+        "rules": {},
+    }
+    for rule in rules:
+        record["rules"][rule] = {
+            scenario: run_rule(inst, rule, scenario, n, seed, targets) for scenario in scenarios
+        }
+    record["anchor"] = anchor_gaps(inst, n, seed, targets)
+    record["seconds"] = time.perf_counter() - t0
+    print(f"{net} n={n} seed={seed}: {record['seconds']:.0f} s", file=sys.stderr, flush=True)
+    return record
+
+
+def summarise(records: list[dict[str, Any]], rules: tuple[str, ...]) -> dict[str, Any]:
+    """Medians over seeds per network, size, rule, scenario and checkpoint; the worst network."""
+    groups: dict[tuple[str, int], list[dict[str, Any]]] = {}
+    for r in records:
+        groups.setdefault((r["network"], r["vehicles"]), []).append(r)
+    table: dict[str, Any] = {}
+    for (net, n), rs in sorted(groups.items()):
+        entry: dict[str, Any] = {}
+        for rule in rules:
+            entry[rule] = {}
+            for scenario in rs[0]["rules"][rule]:
+                labels = rs[0]["rules"][rule][scenario]["gaps"]
+                entry[rule][scenario] = {
+                    label: statistics.median(x["rules"][rule][scenario]["gaps"][label] for x in rs)
+                    for label in labels
+                }
+            for measure in ("microseconds_per_target", "step_microseconds_per_target"):
+                entry[rule][measure] = statistics.median(
+                    statistics.mean(s[measure] for s in x["rules"][rule].values()) for x in rs
+                )
+        entry["anchor"] = {
+            scenario: {
+                label: statistics.median(x["anchor"][scenario][label] for x in rs)
+                for label in rs[0]["anchor"][scenario]
+            }
+            for scenario in rs[0]["anchor"]
+        }
+        table[f"{net}/{n}"] = entry
+    worst: dict[str, Any] = {}
+    for rule in rules:
+        worst[rule] = {}
+        for scenario in ("cold", "warm", "shift"):
+            labels = {lab for e in table.values() for lab in e[rule].get(scenario, {})}
+            worst[rule][scenario] = {
+                label: max(
+                    (e[rule][scenario][label], key)
+                    for key, e in table.items()
+                    if label in e[rule].get(scenario, {})
+                )
+                for label in sorted(labels, key=lambda s: int(s.lstrip("+")))
+            }
+    return {"median_over_seeds": table, "worst_network": worst}
+
+
+def goals(summary: dict[str, Any], rule: str, baseline: str) -> dict[str, Any]:
+    """Each goal of the learning issue for ``rule``: the worst network's median, met or not."""
+    table = summary["median_over_seeds"]
+
+    def values(scenario: str, first: int = 0) -> list[tuple[float, str]]:
+        return [
+            (v, f"{key}@{label}")
+            for key, e in table.items()
+            for label, v in e[rule].get(scenario, {}).items()
+            if int(label.lstrip("+")) >= first
+        ]
+
+    def at(scenario: str, label: str) -> list[tuple[float, str]]:
+        return [(v, w) for v, w in values(scenario) if w.endswith("@" + label)]
+
+    measured: dict[str, tuple[list[tuple[float, str]], float]] = {
+        "cold_3000": (at("cold", "3000"), GOALS["cold"]["3000"]),
+        "cold_30000": (at("cold", "30000"), GOALS["cold"]["30000"]),
+        "warm_every_checkpoint": (values("warm"), GOALS["warm_every"]),
+        "warm_from_3000": (values("warm", 3000), GOALS["warm_from_3000"]),
+        "shift_plus_5000": (at("shift", "+5000"), GOALS["shift_5000"]),
+        "behind_anchor_from_1000": (
+            [
+                (v - table[w.split("@")[0]]["anchor"]["cold"][w.split("@")[1]], w)
+                for v, w in values("cold", 1000)
+                if w.split("@")[1] in table[w.split("@")[0]]["anchor"]["cold"]
+            ],
+            GOALS["anchor_points"],
+        ),
+        f"compute_ratio_to_{baseline}": (
+            [
+                (e[rule]["microseconds_per_target"] / e[baseline]["microseconds_per_target"], k)
+                for k, e in table.items()
+                if baseline in e
+            ],
+            GOALS["compute_ratio"],
+        ),
+        f"step_compute_ratio_to_{baseline}": (
+            [
+                (
+                    e[rule]["step_microseconds_per_target"]
+                    / e[baseline]["step_microseconds_per_target"],
+                    k,
+                )
+                for k, e in table.items()
+                if baseline in e
+            ],
+            GOALS["compute_ratio"],
+        ),
+    }
+    out: dict[str, Any] = {}
+    for name, (found, limit) in measured.items():
+        if found:
+            value, where = max(found)
+            out[name] = {"worst": value, "where": where, "goal": limit, "met": value <= limit}
+    return out
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def rest_curve(net: str, n: int, seed: int, targets: int) -> dict[str, Any]:
+    """The cold curve of the default rule through a live ``routing-svc serve``."""
+    import httpx
+
+    inst = instance(net, n, seed)
+    space = inst.space
+    network = space.network
+    port = free_port()
+    folder = Path(tempfile.mkdtemp(prefix="learning-rest-"))
+    server = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "routing_svc.cli",
+            "serve",
+            "--port",
+            str(port),
+            "--db",
+            str(folder / "events.db"),
+            "--data-dir",
+            str(folder),
+            "--net",
+            f"{net}={resolve_network(NETWORKS[net])}",
+            "--no-demo",
+            "--log-level",
+            "warning",
+        ],
+        env=os.environ.copy(),
+    )
+    base = f"http://127.0.0.1:{port}"
+    try:
+        with httpx.Client(base_url=base, timeout=120.0) as client:
+            for _ in range(600):
+                try:
+                    if client.get("/healthz").status_code == 200:
+                        break
+                except httpx.TransportError:
+                    pass
+                time.sleep(0.1)
+            vehicles = [
+                {
+                    "id": f"v{i:03d}",
+                    "position": {"edge": network.edge_ids[p.edge], "offset": p.offset},
+                }
+                for i, p in enumerate(inst.random_start)
+            ]
+            created = client.post(
+                "/v1/fleets", json={"id": "bench", "network": net, "vehicles": vehicles}
+            )
+            created.raise_for_status()
+            stream = inst.demand.sample(np.random.default_rng([seed, 1]), targets)
+            gaps: dict[str, float] = {}
+            done = 0
+            t0 = time.perf_counter()
+            for mark in [k for k in CHECKPOINTS if k <= targets]:
+                for lo in range(done, mark, 500):
+                    batch = [
+                        {"position": {"edge": network.edge_ids[z.edge], "offset": z.offset}}
+                        for z in stream[lo : min(mark, lo + 500)]
+                    ]
+                    client.post(
+                        "/v1/fleets/bench/targets:batch", json={"targets": batch}
+                    ).raise_for_status()
+                done = mark
+                fleet = client.get("/v1/fleets/bench").json()
+                positions = [
+                    NetPosition(
+                        network.edge_index[v["position"]["edge"]], float(v["position"]["offset"])
+                    )
+                    for v in fleet["vehicles"]
+                ]
+                gaps[str(mark)] = gap(space, positions, inst.demand, inst.optimum[0])
+            seconds = time.perf_counter() - t0
+            rule = fleet["rule"]
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
+    return {
+        "network": net,
+        "vehicles": n,
+        "seed": seed,
+        "rule": rule,
+        "gaps": gaps,
+        "targets_per_second": targets / seconds,
+    }
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--nets", default=",".join(NETWORKS))
+    p.add_argument("--vehicles", default="8,20")
+    p.add_argument("--seeds", default="0,1,2,3,4")
+    p.add_argument("--rules", default="consolidating,paper,probe")
+    p.add_argument("--scenarios", default="cold,warm,shift")
+    p.add_argument("--targets", type=int, default=max(CHECKPOINTS))
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--rest", action="store_true", help="add one curve through the REST API")
+    p.add_argument("--out", type=Path, help="also write the JSON here")
+    args = p.parse_args()
+    rules = tuple(Rule(r).value for r in args.rules.split(","))
+    scenarios = tuple(args.scenarios.split(","))
+    nets = args.nets.split(",")
+    unknown = set(nets) - set(NETWORKS)
+    if unknown:
+        p.error(f"unknown networks {sorted(unknown)}; known: {sorted(NETWORKS)}")
+    work = [
+        (net, int(n), int(seed), rules, scenarios, args.targets)
+        for net in nets
+        for n in args.vehicles.split(",")
+        for seed in args.seeds.split(",")
+    ]
+    started = time.perf_counter()
+    with ProcessPoolExecutor(args.jobs) as pool:
+        records = list(pool.map(job, work))
+    summary = summarise(records, rules)
+    report: dict[str, Any] = {
+        "benchmark": "learning",
+        "demand": "hotspots:3",
+        "baseline": {"compute": "probe (the compiled update of the rule before)"},
+        "checkpoints": list(CHECKPOINTS),
+        "shift": {"at": SHIFT_AT, "after": list(AFTER_SHIFT)},
+        "optimum": f"best p-median found over at most {MAX_SITES} candidate sites",
+        "goals": {rule: goals(summary, rule, "probe") for rule in rules if "probe" in rules},
+        **summary,
+        "records": records,
+        "seconds": time.perf_counter() - started,
+    }
+    if args.rest:
+        report["rest"] = rest_curve(nets[0], int(args.vehicles.split(",")[0]), 0, args.targets)
+    text = json.dumps(report, indent=1)
+    if args.out:
+        args.out.write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
