@@ -17,11 +17,11 @@ references, from the last accepted ones and from scratch.
 
 A p-median of ``m`` targets fits their noise: taken blindly it would pull a
 fleet that already stands at the optimum away from it. So the reservoir is
-split in two halves (even and odd places) and each is solved alone; every
-*fresh* target (one that came after the current references were accepted, so
-that they were not fitted to it) is then priced from the configuration fitted on
-the *other* half, a cross-validated estimate of what solving again gains over
-the current references. Only if the
+split into ``folds`` folds (place ``i`` in fold ``i % folds``) and solved without
+each fold in turn; every *fresh* target (one that came after the current
+references were accepted, so that they were not fitted to it) is then priced from
+the configuration solved without its fold, a cross-validated estimate of what
+solving again gains over the current references. Only if the
 gain exceeds ``confidence`` standard errors of the paired differences is the
 problem solved on the whole reservoir, from the current and the last accepted
 references and from scratch, and the best replaces the references; each
@@ -76,6 +76,8 @@ class ConsolidationPolicy:
         ``first``).
     longest : int
         The longest period between two consolidations.
+    folds : int
+        Folds of the cross-validated test.
     confidence : float
         Standard errors by which the cross-validated gain must exceed zero.
     block : int
@@ -88,13 +90,14 @@ class ConsolidationPolicy:
     reservoir: int = 4000
     first: int = 250
     growth: float = 1.5
-    longest: int = 8000
+    longest: int = 4000
+    folds: int = 4
     confidence: float = 0.0
     block: int = 250
-    shift_ratio: float = 1.5
+    shift_ratio: float = 1.25
 
     def __post_init__(self) -> None:
-        for name in ("reservoir", "first", "longest", "block"):
+        for name in ("reservoir", "first", "longest", "block", "folds"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 2:
                 raise InvalidInput(f"consolidation {name} must be an integer >= 2, got {value!r}")
@@ -113,6 +116,7 @@ class ConsolidationPolicy:
             "first": self.first,
             "growth": self.growth,
             "longest": self.longest,
+            "folds": self.folds,
             "confidence": self.confidence,
             "block": self.block,
             "shift_ratio": self.shift_ratio,
@@ -226,8 +230,9 @@ def consolidate(
     confidence: float,
     updates: Sequence[int],
     fresh: int,
+    folds: int = 2,
 ) -> Consolidation[P]:
-    """Solve each half of the reservoir, test each on the other half, solve all if it pays.
+    """Solve the reservoir without each fold, test on that fold, solve all if it pays.
 
     Parameters
     ----------
@@ -238,7 +243,7 @@ def consolidate(
     anchor : sequence
         The last accepted references (a start of every solve).
     reservoir : sequence
-        The recent targets, oldest first; even and odd places are the two halves.
+        The recent targets, oldest first; place ``i`` is in fold ``i % folds``.
     power : float
         ``q`` of the service cost ``c(T) = T**q``.
     speed : float
@@ -250,23 +255,28 @@ def consolidate(
     fresh : int
         How many of the reservoir's last targets came after the current references
         were accepted: only they test.
+    folds : int
+        Folds of the cross-validation (at least 2).
     """
     p = len(positions)
     if len(reservoir) < 2 or len(anchor) != p or len(updates) != p:
         raise InvalidInput("a consolidation needs two targets and one anchor per vehicle")
+    if isinstance(folds, bool) or not isinstance(folds, int) or folds < 2:
+        raise InvalidInput(f"a consolidation needs at least 2 folds, got {folds!r}")
     targets = list(dict.fromkeys(reservoir))
     column = {z: j for j, z in enumerate(targets)}
     places = np.fromiter((column[z] for z in reservoir), dtype=np.int64, count=len(reservoir))
-    halves = [
-        np.bincount(places[half::2], minlength=len(targets)).astype(np.float64) for half in (0, 1)
+    parts = [
+        np.bincount(places[f::folds], minlength=len(targets)).astype(np.float64)
+        for f in range(folds)
     ]
-    weight = halves[0] + halves[1]
+    weight = np.sum(parts, axis=0)
     first_fresh = len(reservoir) - min(max(fresh, 0), len(reservoir))
     tests = [
         np.bincount(
-            places[first_fresh + (first_fresh + half) % 2 :: 2], minlength=len(targets)
+            places[first_fresh + (f - first_fresh) % folds :: folds], minlength=len(targets)
         ).astype(np.float64)
-        for half in (0, 1)
+        for f in range(folds)
     ]
     stride = -(-len(targets) // MAX_SITE_TARGETS)
     sites = space.candidate_references(targets[::stride], [*positions, *anchor])
@@ -277,11 +287,11 @@ def consolidate(
     anchored = _distinct(np.array([row[x] for x in anchor], dtype=np.int64), len(sites))
     now = costs[actual].min(axis=0)
     differences, weights = [], []
-    for fit, test in ((halves[0], tests[1]), (halves[1], tests[0])):
+    for part, test in zip(parts, tests, strict=True):
         tested = test > 0
         if not tested.any():
             continue
-        challenger = _best_fit(costs, fit, [current, anchored])
+        challenger = _best_fit(costs, weight - part, [current, anchored])
         differences.append((costs[challenger].min(axis=0) - now)[tested])
         weights.append(test[tested])
     if not differences:

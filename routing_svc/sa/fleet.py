@@ -501,6 +501,7 @@ class Fleet(Generic[P]):
                 confidence=policy.confidence,
                 updates=state.updates,
                 fresh=state.targets - learning.accepted_at,
+                folds=policy.folds,
             )
         if len(done.positions) != len(self.vehicles) or len(done.updates) != len(self.vehicles):
             raise ReplayMismatch("a recorded consolidation does not match the fleet's vehicles")

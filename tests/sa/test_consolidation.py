@@ -614,8 +614,14 @@ CALM = ConsolidationPolicy(shift_ratio=1e9)  # the shift test never fires
 
 def test_policy_defaults() -> None:
     policy = ConsolidationPolicy()
-    assert (policy.reservoir, policy.first, policy.longest, policy.block) == (4000, 250, 8000, 250)
-    assert (policy.growth, policy.confidence, policy.shift_ratio) == (1.5, 0.0, 1.5)
+    # the values docs/learning.md states
+    assert (policy.reservoir, policy.first, policy.longest, policy.block) == (4000, 250, 4000, 250)
+    assert (policy.growth, policy.folds, policy.confidence, policy.shift_ratio) == (
+        1.5,
+        4,
+        0.0,
+        1.25,
+    )
 
 
 Run = tuple[list[NetPosition], Fleet[NetPosition], list[Any]]
@@ -982,3 +988,35 @@ def test_a_wide_reservoir_offers_an_evenly_spaced_subset_of_its_targets(
     stride = -(-len(distinct) // 7)
     assert offered == [distinct[::stride]]
     assert len(offered[0]) <= 7
+
+
+@pytest.mark.parametrize("folds", [0, 1, True, 2.0])
+def test_a_cross_validation_needs_two_folds(space: RoadSpace, folds: Any) -> None:
+    _, reservoir = demand_stream(3, 20)
+    start = poor_start(2)
+    with pytest.raises(InvalidInput):
+        consolidate(
+            space, start, start, reservoir, power=1.0, speed=1.0, confidence=0.0,
+            updates=[0, 0], fresh=20, folds=folds,
+        )  # fmt: skip
+    with pytest.raises(InvalidInput):
+        ConsolidationPolicy(folds=folds)
+
+
+def test_more_folds_test_the_same_fresh_targets(space: RoadSpace) -> None:
+    # every fresh target is priced once, whatever the number of folds: the standard error
+    # is over as many targets, and with no fresh target nothing is tested
+    _, reservoir = demand_stream(4, 60)
+    start = poor_start(2)
+    for folds in (2, 3, 4, 7):
+        none = consolidate(
+            space, start, start, reservoir, power=1.0, speed=1.0, confidence=0.0,
+            updates=[0, 0], fresh=0, folds=folds,
+        )  # fmt: skip
+        assert not none.accepted and none.gain == 0.0 and none.standard_error == 0.0
+        done = consolidate(
+            space, start, start, reservoir, power=1.0, speed=1.0, confidence=0.0,
+            updates=[0, 0], fresh=60, folds=folds,
+        )  # fmt: skip
+        assert done.accepted  # a poor start loses to any refit
+        assert done.gain < 0.0 < done.standard_error
