@@ -443,6 +443,16 @@ def main() -> int:
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--rest", action="store_true", help="add one curve through the REST API")
     p.add_argument("--out", type=Path, help="also write the JSON here")
+    p.add_argument(
+        "--records", type=Path, help="append each finished job's record here (JSON lines)"
+    )
+    p.add_argument(
+        "--summarise",
+        type=Path,
+        nargs="*",
+        metavar="RECORDS",
+        help="only summarise records written by --records (one or more files)",
+    )
     args = p.parse_args()
     rules = tuple(Rule(r).value for r in args.rules.split(","))
     scenarios = tuple(args.scenarios.split(","))
@@ -457,8 +467,18 @@ def main() -> int:
         for seed in args.seeds.split(",")
     ]
     started = time.perf_counter()
-    with ProcessPoolExecutor(args.jobs) as pool:
-        records = list(pool.map(job, work))
+    records: list[dict[str, Any]] = []
+    if args.summarise is not None:
+        for path in args.summarise:
+            records += [json.loads(line) for line in path.read_text().splitlines() if line]
+        rules = tuple(r for r in rules if all(r in x["rules"] for x in records))
+    else:
+        with ProcessPoolExecutor(args.jobs) as pool:
+            for record in pool.map(job, work):
+                records.append(record)
+                if args.records:
+                    with args.records.open("a") as out:
+                        out.write(json.dumps(record) + "\n")
     summary = summarise(records, rules)
     report: dict[str, Any] = {
         "benchmark": "learning",

@@ -265,6 +265,7 @@ class Fleet(Generic[P]):
     _types: tuple[str, ...] = field(init=False, repr=False)
     _index: dict[str, int] = field(init=False, repr=False)
     _any_one: Requirement = field(init=False, repr=False)
+    _identical: bool = field(init=False, repr=False)
     _probe_cache: _ProbeCache[P] | None = field(init=False, repr=False, default=None)
     _compiled: tuple[object, FleetConfig, SingleTargetServing[P] | None] | None = field(
         init=False, repr=False, default=None
@@ -295,6 +296,9 @@ class Fleet(Generic[P]):
         self._types = tuple(v.type for v in self.vehicles)
         self._index = {v.id: i for i, v in enumerate(self.vehicles)}
         self._any_one, _ = build_requirement(self._types, None)
+        self._identical = len(set(self._types)) == 1 and bool(
+            np.all(self._speeds == self._speeds[0])
+        )
         policy = self.config.consolidation
         if policy is not None and self.state.learning is None:
             self.state.learning = Learning(
@@ -455,11 +459,7 @@ class Fleet(Generic[P]):
 
     def _consolidates(self) -> bool:
         """Whether this fleet can consolidate: one type, one speed, a space that can."""
-        return (
-            len(set(self._types)) == 1
-            and bool(np.all(self._speeds == self._speeds[0]))
-            and _samples(type(self.space))
-        )
+        return self._identical and _samples(type(self.space))
 
     def _learn_from(
         self,
