@@ -18,9 +18,10 @@ from routing_svc.sa.schedules import Counting, schedule_from_dict
 from routing_svc.service.networks import NetworkEntry
 from routing_svc.service.reference import (
     build_demand,
+    check_mix,
     describe_spec,
     optimum_start,
-    solve_reference,
+    reference_optimum,
 )
 from routing_svc.service.schemas import FleetSpec
 from routing_svc.types import NetPosition
@@ -31,6 +32,10 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
     objective = Objective.parse(spec.objective)
     space = entry.space(spec.cost)
     n = len(spec.vehicles)
+    types = [v.type for v in spec.vehicles]
+    demand_spec = None if spec.reference_demand is None else describe_spec(spec.reference_demand)
+    if demand_spec is not None:
+        check_mix(demand_spec, types)
     missing = [v.id for v in spec.vehicles if v.position is None]
     if spec.start is None and missing:
         raise InvalidInput(
@@ -69,11 +74,16 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
         prior_counts=counts,
     )
     reference = None
-    if spec.reference_demand is not None:
-        demand_spec = describe_spec(spec.reference_demand)
+    if demand_spec is not None:
         demand = build_demand(entry, demand_spec)
-        _, optimum = solve_reference(
-            entry, cost=spec.cost, demand=demand, vehicles=n, power=objective.power
+        optimum = reference_optimum(
+            entry,
+            cost=spec.cost,
+            spec=demand_spec,
+            demand=demand,
+            types=types,
+            speeds=[v.speed for v in spec.vehicles],
+            power=objective.power,
         )
         reference = {"demand": demand_spec, "optimum": optimum}
     return {

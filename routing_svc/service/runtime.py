@@ -264,6 +264,7 @@ class FleetRuntime:
         optimum = float(self.reference["optimum"]["objective"])
         value = expected_cost_now(self)
         return {
+            "kind": self.reference["optimum"].get("kind", "p-median"),
             "objective": optimum,
             "expected_cost": value,
             "gap": (value - optimum) / optimum if optimum > 0 else 0.0,

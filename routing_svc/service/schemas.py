@@ -72,12 +72,45 @@ class StartSpec(Strict):
     optimum: OptimumStart
 
 
+class RequirementShare(Strict):
+    requires: Annotated[
+        list[TypeName],
+        Field(
+            max_length=64,
+            description="The multiset of vehicle types a target of this class needs "
+            "(['A', 'B']: one A and one B; ['A', 'A']: two A's; []: any one vehicle).",
+        ),
+    ]
+    share: Annotated[
+        float,
+        Field(
+            allow_inf_nan=False,
+            gt=0.0,
+            le=1e9,
+            description="Relative frequency of the class (the shares are normalised to sum to 1).",
+        ),
+    ]
+
+
 class DemandSpec(Strict):
     kind: Literal["uniform", "hotspots", "weights"]
     count: Annotated[int, Field(ge=1, le=50)] = 3
     spread: Annotated[float, Field(allow_inf_nan=False, gt=0.0)] | None = None
     seed: Annotated[int, Field(ge=0, le=2**63 - 1)] = 0
     weights: dict[str, Annotated[float, Field(allow_inf_nan=False, ge=0.0)]] | None = None
+    requirements: (
+        Annotated[
+            list[RequirementShare],
+            Field(
+                min_length=1,
+                max_length=64,
+                description="The requirement mix of the targets; default: any one vehicle. "
+                "With more than one vehicle type or speed, or any required type, the "
+                "optimum is the heterogeneous one (objective (11) of Le Ny & Pappas).",
+            ),
+        ]
+        | None
+    ) = None
 
 
 class FleetSpec(Strict):
