@@ -133,8 +133,9 @@ class FleetSpec(Strict):
             Literal["consolidating", "probe", "paper"],
             Field(
                 description="Learning rule: 'consolidating' (held steps of eq. (10) and "
-                "consolidations of recent targets; the default), 'probe' (eq. (10) with "
-                "the backward probe) or 'paper' (eq. (10) alone). Without a rule, a "
+                "consolidations of recent targets; the default for identical vehicles), "
+                "'probe' (eq. (10) with the backward probe; the default for vehicles of "
+                "several types or speeds) or 'paper' (eq. (10) alone). Without a rule, a "
                 "'probe' value or annealing chooses the probe rule (a probe of 0: the "
                 "paper's), as before.",
             ),
@@ -158,15 +159,18 @@ class FleetSpec(Strict):
     ) = None
 
     def learning_rule(self) -> str:
-        """The rule asked for: ``rule``, else the probe rule when a probe window or
-        annealing is given (the paper's for a window of 0), else the default."""
+        """The rule asked for: ``rule``; else the probe rule when a probe window or
+        annealing is given (the paper's for a window of 0); else the default for
+        identical vehicles (one type, one speed), whose fleets consolidate, and the
+        probe rule for the others, which cannot."""
         if self.rule is not None:
             return self.rule
         if self.probe is not None:
             return "probe" if self.probe > 0.0 else "paper"
         if self.annealing is not None:
             return "probe"
-        return DEFAULT_RULE.value
+        identical = len({(v.type, v.speed) for v in self.vehicles}) == 1
+        return DEFAULT_RULE.value if identical else "probe"
 
     @field_validator("vehicles")
     @classmethod

@@ -66,6 +66,12 @@ def add_parser(subparsers: Any) -> None:
     )
     p.add_argument("--cost", choices=["time", "length"], default="time")
     p.add_argument(
+        "--rule",
+        choices=["consolidating", "probe", "paper"],
+        default=None,
+        help="learning rule of the service's fleets (default: the service's)",
+    )
+    p.add_argument(
         "--policies",
         default=None,
         help="comma list (default: sa,static,optimum,sumo-stop,sumo-circling; "
@@ -117,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
         backend=args.backend,
         gui=args.gui,
         workers=args.workers,
+        rule=args.rule,
     )
     result = run_cosim(spec, out_dir=args.out, progress=not args.quiet, resume=args.resume)
     if not args.no_plots:

@@ -87,6 +87,9 @@ class CosimSpec:
         Parallel SUMO processes.
     snapshot_period : float
         Seconds between records of the reference positions.
+    rule : str, optional
+        The learning rule of the service's fleets (``consolidating``, ``probe`` or
+        ``paper``; ``None``: the service's default).
     """
 
     network: str
@@ -111,6 +114,7 @@ class CosimSpec:
     gui: bool = False
     workers: int = 2
     snapshot_period: float = 300.0
+    rule: str | None = None
 
     def __post_init__(self) -> None:
         if self.mode not in ("persons", "incidents"):
@@ -228,6 +232,7 @@ def _jobs(spec: CosimSpec, prepared: Prepared, *, progress: bool, resume: bool) 
                     backend=spec.backend,
                     gui=spec.gui,
                     snapshot_period=spec.snapshot_period,
+                    rule=spec.rule,
                     progress=progress and (single or spec.gui),
                     resume=resume,
                 )

@@ -92,6 +92,8 @@ class PolicyJob:
         Show a progress bar over simulated time.
     resume : bool
         Reuse ``run-<policy>.json`` in ``workdir`` if it was saved for the same job.
+    rule : str, optional
+        The fleet's learning rule (``None``: the service's default).
     """
 
     policy: Policy
@@ -112,6 +114,7 @@ class PolicyJob:
     snapshot_period: float = 300.0
     progress: bool = False
     resume: bool = False
+    rule: str | None = None
 
     def key(self) -> str:
         """What determines the run's result, as JSON (for reusing a saved run).
@@ -182,6 +185,8 @@ def _fleet_spec(job: PolicyJob, network_id: str, fleet_id: str) -> dict[str, Any
         "step": dict(job.step) if job.step is not None else None,
         "seed": job.seed,
     }
+    if job.rule is not None:
+        spec["rule"] = job.rule
     if job.history:
         sample = [{"edge": edge, "offset": offset} for edge, offset in job.history]
         spec["vehicles"] = [{"id": v.id} for v in job.vehicles]

@@ -88,6 +88,16 @@ def click_a_target(dash: DashboardPage, api: ServiceClient, edges: list[Edge]) -
     return dash.screenshot("click-to-post")
 
 
+def requirement_mix() -> list[dict[str, Any]]:
+    """The classes of :data:`REQUIRES` with their shares (each entry is drawn equally
+    often), so that the dashboard's gap is against the heterogeneous optimum."""
+    shares: dict[tuple[str, ...], float] = {}
+    for requires in REQUIRES:
+        key = tuple(requires or ())
+        shares[key] = shares.get(key, 0.0) + 1.0
+    return [{"requires": list(k), "share": v} for k, v in shares.items()]
+
+
 def make_screenshots(out: Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
@@ -97,7 +107,15 @@ def make_screenshots(out: Path) -> list[Path]:
         try:
             edges = api.edges()
             weights = hotspot_weights(edges, seed=5)
-            api.create_fleet(FLEET, TYPES, reference_demand={"kind": "weights", "weights": weights})
+            api.create_fleet(
+                FLEET,
+                TYPES,
+                reference_demand={
+                    "kind": "weights",
+                    "weights": weights,
+                    "requirements": requirement_mix(),
+                },
+            )
             targets = sample_targets(edges, weights, TARGETS, seed=3)
             api.post_batch(FLEET, targets[:BATCH])
             with sync_playwright() as playwright:

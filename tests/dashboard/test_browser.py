@@ -113,7 +113,8 @@ def test_vehicles_appear_where_the_api_says(
 def test_a_posted_target_moves_the_right_vehicle_within_two_seconds(
     shared_server: LiveServer, api: ServiceClient, fleet_id: str, open_dashboard: OpenDashboard
 ) -> None:
-    api.create_fleet(fleet_id, ["A", "B", "A", "B"])
+    # the paper's rule: every target moves the vehicle that arrives last
+    api.create_fleet(fleet_id, ["A", "B", "A", "B"], rule="paper")
     dash = open_dashboard(shared_server).open(fleet_id)
     before = dash.vehicles()
 

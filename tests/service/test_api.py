@@ -250,12 +250,13 @@ def test_the_rule_is_consolidating_by_default_and_a_probe_window_keeps_the_probe
     assert wider["rule"] == "probe" and wider["probe"] == pytest.approx(0.2 * radius)
     off = client.post("/v1/fleets", json=fleet_body("off", probe=0)).json()
     assert off["rule"] == "paper" and off["probe"] is None
-    for name, extra in [
+    cases: list[tuple[str, dict[str, Any]]] = [
         ("bad", {"probe": -0.1}),
         ("mixed", {"rule": "consolidating", "probe": 0.1}),
         ("noise", {"rule": "consolidating", "annealing": {"scale": 5.0}}),
         ("unknown", {"rule": "kmeans"}),
-    ]:
+    ]
+    for name, extra in cases:
         bad = client.post("/v1/fleets", json=fleet_body(name, **extra))
         assert bad.status_code == 422, (name, bad.text)
         assert bad.headers["content-type"] == "application/problem+json"

@@ -25,6 +25,7 @@ def client(grid_net: Path) -> Iterator[InProcessFleetClient]:
                 "id": "f",
                 "network": network,
                 "cost": "time",
+                "rule": "paper",  # every update moves the mover's reference
                 "vehicles": [
                     {"id": "v0", "position": {"edge": "A0A1", "offset": 100.0}},
                     {"id": "v1", "position": {"edge": "F5F4", "offset": 100.0}},
