@@ -52,7 +52,7 @@ from routing_svc.errors import InvalidInput, UnmetRequirement, Unreachable
 from routing_svc.optimum.candidates import distinct_rows
 from routing_svc.optimum.evaluate import CostModel
 from routing_svc.optimum.heterogeneous_milp import CompiledClass, solve_milp
-from routing_svc.optimum.pmedian import PROVEN_GAP, solve_pmedian
+from routing_svc.optimum.pmedian import PROVEN_GAP, checked_costs, solve_pmedian
 from routing_svc.sa.requirements import build_requirement
 from routing_svc.sa.space import Requirement
 from routing_svc.types import FloatArray, IntArray, NetPosition, PlanePosition
@@ -344,17 +344,8 @@ def _validated(
     power: float,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Distances and weights of the atoms with ``w_j > 0``, and the speeds."""
-    d = np.asarray(costs, dtype=np.float64)
-    w = np.asarray(weights, dtype=np.float64)
+    d, w = checked_costs(costs, weights)
     v = np.asarray(speeds, dtype=np.float64)
-    if d.ndim != 2 or d.shape[0] == 0 or d.shape[1] == 0:
-        raise InvalidInput(f"costs must be a non-empty 2-D matrix, got shape {d.shape}")
-    if w.shape != (d.shape[1],):
-        raise InvalidInput(f"weights of shape {w.shape} do not match {d.shape[1]} demand atoms")
-    if not np.all(np.isfinite(d)) or np.any(d < 0):
-        raise InvalidInput("costs must be finite and >= 0 (is every atom reachable?)")
-    if not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
-        raise InvalidInput("weights must be finite, >= 0, with a positive sum")
     if len(vehicle_types) == 0 or v.shape != (len(vehicle_types),):
         raise InvalidInput(f"need one speed per vehicle (and a vehicle), got {v.shape}")
     if not np.all(np.isfinite(v)) or np.any(v <= 0.0):

@@ -168,8 +168,15 @@ def objective(costs: FloatArray, weights: FloatArray, sites: IntArray | list[int
     return math.fsum((np.asarray(weights, dtype=np.float64) * best).tolist())
 
 
-def _validated(costs: FloatArray, weights: FloatArray, p: int) -> tuple[FloatArray, FloatArray]:
-    """Check the inputs; return the matrix and weights of the atoms with ``w_j > 0``."""
+def checked_costs(costs: FloatArray, weights: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """A site-by-atom cost matrix and the atoms' weights as float arrays, checked.
+
+    Raises
+    ------
+    InvalidInput
+        An empty or mis-shaped matrix, a negative or non-finite cost (an atom no site
+        reaches), or weights that are negative, non-finite or sum to zero.
+    """
     c = np.asarray(costs, dtype=np.float64)
     w = np.asarray(weights, dtype=np.float64)
     if c.ndim != 2 or c.shape[0] == 0 or c.shape[1] == 0:
@@ -180,6 +187,12 @@ def _validated(costs: FloatArray, weights: FloatArray, p: int) -> tuple[FloatArr
         raise InvalidInput("costs must be finite and >= 0 (is every atom reachable?)")
     if not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
         raise InvalidInput("weights must be finite, >= 0, with a positive sum")
+    return c, w
+
+
+def _validated(costs: FloatArray, weights: FloatArray, p: int) -> tuple[FloatArray, FloatArray]:
+    """Check the inputs; return the matrix and weights of the atoms with ``w_j > 0``."""
+    c, w = checked_costs(costs, weights)
     if isinstance(p, bool) or not isinstance(p, int | np.integer):
         raise InvalidInput(f"p must be an integer, got {p!r}")
     if not 1 <= p <= c.shape[0]:

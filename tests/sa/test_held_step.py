@@ -29,6 +29,7 @@ from routing_svc.network import CompiledNetwork, RoadSpace, load_network
 from routing_svc.sa.held_step import Hold, JunctionSpace, held_step
 from routing_svc.sa.space import Requirement
 from routing_svc.types import NetPosition
+from tests.sa.conftest import hand_made_net_xml
 
 _XY = {"j0": (0.0, 0.0), "j1": (100.0, 0.0), "j2": (200.0, 0.0), "j3": (100.0, 100.0)}
 _EDGES = {
@@ -47,27 +48,7 @@ _ONE = Requirement(np.zeros(1, dtype=np.int64), np.ones(1, dtype=np.int64))
 
 
 def _net_xml() -> str:
-    parts = [
-        '<net version="1.9"><location netOffset="0,0" convBoundary="0,0,200,100" '
-        'origBoundary="0,0,200,100" projParameter="!"/>'
-    ]
-    for edge, (start, end, length) in _EDGES.items():
-        (x0, y0), (x1, y1) = _XY[start], _XY[end]
-        parts.append(
-            f'<edge id="{edge}" from="{start}" to="{end}"><lane id="{edge}_0" index="0" '
-            f'speed="10" length="{length}" shape="{x0},{y0} {x1},{y1}"/></edge>'
-        )
-    for junction, (x, y) in _XY.items():
-        incoming = " ".join(f"{e}_0" for e, (_, end, _) in _EDGES.items() if end == junction)
-        parts.append(
-            f'<junction id="{junction}" type="priority" x="{x}" y="{y}" '
-            f'incLanes="{incoming}" intLanes="" shape="{x},{y}"/>'
-        )
-    for src, dst in _TURNS:
-        parts.append(
-            f'<connection from="{src}" to="{dst}" fromLane="0" toLane="0" dir="s" state="M"/>'
-        )
-    return "".join(parts) + "</net>"
+    return hand_made_net_xml(_XY, _EDGES, _TURNS)
 
 
 @pytest.fixture(scope="module")

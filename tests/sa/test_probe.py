@@ -29,6 +29,7 @@ from routing_svc.sa import (
 )
 from routing_svc.sa.space import DirectedSpace, Requirement
 from routing_svc.types import NetPosition, PlanePosition
+from tests.sa.conftest import hand_made_net_xml
 
 _XY = {"j0": (0.0, 0.0), "j1": (100.0, 0.0), "j2": (150.0, 80.0), "j3": (150.0, -80.0)}
 _EDGES = {"a": ("j0", "j1"), "b": ("j1", "j2"), "c": ("j1", "j3"), "d": ("j2", "j0")}
@@ -37,27 +38,7 @@ _TURNS = [("a", "b"), ("a", "c"), ("b", "d"), ("c", "e"), ("d", "a"), ("e", "a")
 
 
 def _net_xml() -> str:
-    parts = [
-        '<net version="1.9"><location netOffset="0,0" convBoundary="0,-80,150,80" '
-        'origBoundary="0,-80,150,80" projParameter="!"/>'
-    ]
-    for edge, (start, end) in _EDGES.items():
-        (x0, y0), (x1, y1) = _XY[start], _XY[end]
-        parts.append(
-            f'<edge id="{edge}" from="{start}" to="{end}"><lane id="{edge}_0" index="0" '
-            f'speed="10" length="100" shape="{x0},{y0} {x1},{y1}"/></edge>'
-        )
-    for junction, (x, y) in _XY.items():
-        incoming = " ".join(f"{e}_0" for e, (_, end) in _EDGES.items() if end == junction)
-        parts.append(
-            f'<junction id="{junction}" type="priority" x="{x}" y="{y}" '
-            f'incLanes="{incoming}" intLanes="" shape="{x},{y}"/>'
-        )
-    for src, dst in _TURNS:
-        parts.append(
-            f'<connection from="{src}" to="{dst}" fromLane="0" toLane="0" dir="s" state="M"/>'
-        )
-    return "".join(parts) + "</net>"
+    return hand_made_net_xml(_XY, {e: (a, b, 100.0) for e, (a, b) in _EDGES.items()}, _TURNS)
 
 
 @pytest.fixture(scope="module")
