@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Literal
 
 from routing_svc.errors import InvalidNetwork, UnknownNetwork
+from routing_svc.paths import cache_root
 
 __all__ = [
     "GENERATED",
@@ -174,9 +175,7 @@ def sumo_home() -> Path | None:
 
 def cache_dir() -> Path:
     """Where generated networks go: ``$ROUTING_SVC_CACHE/nets`` or ``~/.cache/routing_svc/nets``."""
-    root = os.environ.get("ROUTING_SVC_CACHE")
-    base = Path(root) if root else Path.home() / ".cache" / "routing_svc"
-    return base / "nets"
+    return cache_root() / "nets"
 
 
 def _binary(name: str) -> str:

@@ -28,6 +28,7 @@ from routing_svc.errors import InvalidNetwork, UnknownNetwork
 from routing_svc.network.compile import CompiledNetwork, NetworkReduction, compile_network
 from routing_svc.network.identity import network_sha256
 from routing_svc.network.projection import GeoProjection
+from routing_svc.paths import cache_root
 
 __all__ = ["COMPILE_FORMAT", "default_cache_dir", "load_network"]
 
@@ -48,9 +49,8 @@ _DTYPES = {
 
 
 def default_cache_dir() -> Path:
-    """``$ROUTING_SVC_CACHE``, or ``~/.cache/routing_svc``."""
-    configured = os.environ.get("ROUTING_SVC_CACHE")
-    return Path(configured) if configured else Path.home() / ".cache" / "routing_svc"
+    """:func:`routing_svc.paths.cache_root`: ``$ROUTING_SVC_CACHE``, or ``~/.cache/routing_svc``."""
+    return cache_root()
 
 
 def _cache_key(source_sha256: str, vclass: str) -> str:
