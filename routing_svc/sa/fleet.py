@@ -21,6 +21,7 @@ backward probe; and ``consolidating``, the paper's step held at junctions
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import deque
 from collections.abc import Sequence
@@ -759,38 +760,23 @@ def prior_counts(
     return tuple(counts)
 
 
-_DIRECTED: dict[type, bool] = {}
-_JUNCTIONS: dict[type, bool] = {}
-_SAMPLES: dict[type, bool] = {}
+@functools.cache
+def _offers(kind: type, *methods: str) -> bool:
+    """Whether spaces of class ``kind`` have every one of ``methods`` (checked once per
+    class and protocol: a runtime protocol check inspects every method)."""
+    return all(callable(getattr(kind, name, None)) for name in methods)
 
 
 def _has_junctions(kind: type) -> bool:
-    """Whether spaces of class ``kind`` are :class:`JunctionSpace` s (checked once per class)."""
-    known = _JUNCTIONS.get(kind)
-    if known is None:
-        known = _JUNCTIONS[kind] = all(
-            callable(getattr(kind, name, None)) for name in ("junction_ahead", "advance")
-        )
-    return known
+    """Whether spaces of class ``kind`` are :class:`JunctionSpace` s."""
+    return _offers(kind, "junction_ahead", "advance")
 
 
 def _samples(kind: type) -> bool:
-    """Whether spaces of class ``kind`` are :class:`SampleSpace` s (checked once per class)."""
-    known = _SAMPLES.get(kind)
-    if known is None:
-        known = _SAMPLES[kind] = all(
-            callable(getattr(kind, name, None)) for name in ("candidate_references", "cost_matrix")
-        )
-    return known
+    """Whether spaces of class ``kind`` are :class:`SampleSpace` s."""
+    return _offers(kind, "candidate_references", "cost_matrix")
 
 
 def _is_directed(kind: type) -> bool:
-    """Whether spaces of class ``kind`` are :class:`DirectedSpace` s (checked once per class:
-    a runtime protocol check inspects every method)."""
-    known = _DIRECTED.get(kind)
-    if known is None:
-        known = _DIRECTED[kind] = all(
-            callable(getattr(kind, name, None))
-            for name in ("back_probes", "arrival_times", "back_off", "entry")
-        )
-    return known
+    """Whether spaces of class ``kind`` are :class:`DirectedSpace` s."""
+    return _offers(kind, "back_probes", "arrival_times", "back_off", "entry")

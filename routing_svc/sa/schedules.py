@@ -165,11 +165,8 @@ def default_probe(
     """The probe window ``h`` (:attr:`routing_svc.sa.FleetConfig.probe`), in cost units.
 
     ``h = fraction * R`` with the cell radius ``R = typical_cost / sqrt(p)`` of
-    :func:`default_schedule`. Measured on SUMO's DRT district (10 vehicles,
-    hotspot demand, 5 seeds), fractions from 0.025 to 0.1 with step scales 0.125
-    to 0.5, and 0.2 with step scales up to 0.25, all keep a p-median start
-    within 3 % of the optimum (0.2 with 0.5 ends at 3.1 %; the paper's rule
-    alone leaves it by 10-41 %); ``docs/benchmarks.md`` has the table.
+    :func:`default_schedule`: the probe rule's window, and the junction window of
+    the held step (:mod:`routing_svc.sa.held_step`).
     """
     if not fraction >= 0.0:
         raise InvalidInput("the probe fraction must be >= 0")
