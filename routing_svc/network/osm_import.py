@@ -76,8 +76,6 @@ _COUNTED = {
     "geometry_nodes_removed": re.compile(r"^\s*(\d+) nodes removed"),
     "roundabouts_guessed": re.compile(r"^\s*Guessed (\d+) roundabout"),
 }
-_ROOT = re.compile(rb"<([A-Za-z_][\w.:-]*)")
-_SKIP = re.compile(rb"<\?.*?\?>|<!--.*?-->", re.DOTALL)
 
 
 @dataclass(frozen=True, slots=True)
@@ -103,7 +101,7 @@ class NetconvertLog:
 
     @classmethod
     def parse(cls, stdout: str, stderr: str) -> NetconvertLog:
-        """Read netconvert's verbose output and its aggregated warnings (``--aggregate-warnings 0``)."""
+        """Read netconvert's verbose output and its warnings (``--aggregate-warnings 0``)."""
         counts: dict[str, int] = {}
         for line in stdout.splitlines():
             for name, pattern in _COUNTED.items():
@@ -237,17 +235,20 @@ def screen_osm(source: Path | bytes | bytearray, *, destination: Path, max_bytes
 
 
 def looks_like_osm(data: bytes | bytearray) -> bool:
-    """Whether the first element of ``data`` (plain or gzip XML) is ``<osm>``.
+    """Whether the root element of ``data`` (plain or gzip XML) is ``<osm>``.
 
-    A sniff of the first inflated chunk, for telling an OpenStreetMap upload
-    from a SUMO network; the full screen still decides whether it is usable.
+    A sniff of the first inflated chunk through the same :class:`XmlScreen`,
+    for telling an OpenStreetMap upload from a SUMO network; anything the
+    screen refuses in that chunk is not taken for OpenStreetMap (the network
+    checks then say what is wrong).
     """
+    screen = XmlScreen(root="osm")
     try:
         first = next(iter(plain_xml_chunks(data)), b"")
+        screen.feed(first)
     except InvalidNetwork:
         return False
-    found = _ROOT.search(_SKIP.sub(b"", first))
-    return found is not None and found.group(1) == b"osm"
+    return screen.callbacks.root == "osm"
 
 
 def _sumo_tool(name: str) -> tuple[str, dict[str, str], Path]:
