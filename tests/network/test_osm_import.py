@@ -123,7 +123,7 @@ def _lonlat_box(path: Path) -> tuple[float, ...]:
     raise AssertionError("no <location>")
 
 
-def _metres(a: tuple[float, float], b: tuple[float, float]) -> float:
+def _metres(a: tuple[float, ...], b: tuple[float, ...]) -> float:
     lat = math.radians((a[1] + b[1]) / 2)
     return math.hypot((a[0] - b[0]) * 111_320 * math.cos(lat), (a[1] - b[1]) * 110_540)
 
