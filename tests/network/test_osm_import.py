@@ -7,6 +7,7 @@ import functools
 import gzip
 import json
 import math
+import os
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -16,8 +17,6 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from routing_svc.network import load_network
-from routing_svc.network.projection import GeoProjection
 from routing_svc.service.app import create_app
 from routing_svc.service.settings import Settings
 
@@ -52,13 +51,15 @@ def block_osm() -> bytes:
     ).encode()
 
 
-def cli(*args: str) -> subprocess.CompletedProcess[str]:
+def cli(*args: str, cache: Path) -> subprocess.CompletedProcess[str]:
+    """``routing-svc ARGS`` in a fresh process, compiled networks cached under ``cache``."""
+    env = {**os.environ, "PYTHONPATH": str(REPO), "ROUTING_SVC_CACHE": str(cache)}
     return subprocess.run(
         [sys.executable, "-m", "routing_svc.cli", *args],
         capture_output=True,
         text=True,
         cwd=REPO,
-        env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin", "HOME": str(Path.home())},
+        env=env,
         check=False,
     )
 
@@ -96,7 +97,14 @@ EXPECTED = {
 def test_block_gives_the_junctions_edges_and_one_way_direction(tmp_path: Path) -> None:
     source = tmp_path / "block.osm.xml"
     source.write_bytes(block_osm())
-    out = cli("import-osm", str(source), "-o", str(tmp_path / "block.net.xml.gz"), "--json")
+    out = cli(
+        "import-osm",
+        str(source),
+        "-o",
+        str(tmp_path / "block.net.xml.gz"),
+        "--json",
+        cache=tmp_path,
+    )
     assert out.returncode == 0, out.stderr
     summary = json.loads(out.stdout)
     # three two-way streets (two edges each) and one one-way street; four corner junctions
@@ -129,27 +137,23 @@ def _metres(a: tuple[float, ...], b: tuple[float, ...]) -> float:
 
 
 def test_bad_hersfeld_matches_the_shipped_network(tmp_path: Path) -> None:
+    """Same area as DLR's network of the same extract, car counts in the same range
+    (``shared/nets/README.md``: 4,057 car edges, about 1,865 junctions in the car component)."""
     out = tmp_path / "bh.net.xml.gz"
-    done = cli("import-osm", str(SHARED / "badhersfeld.osm.xml.gz"), "-o", str(out), "--json")
+    source = SHARED / "badhersfeld.osm.xml.gz"
+    done = cli("import-osm", str(source), "-o", str(out), "--json", cache=tmp_path)
     assert done.returncode == 0, done.stderr
     summary = json.loads(done.stdout)
     mine, shipped = _lonlat_box(out), _lonlat_box(SHARED / "badhersfeld.net.xml.gz")
     assert _metres(mine[:2], shipped[:2]) < 300 and _metres(mine[2:], shipped[2:]) < 300
-    reference = load_network(SHARED / "badhersfeld.net.xml.gz", cache_dir=tmp_path)
-    assert reference.reduction.usable_edges == 4057
     assert 0.8 < summary["car_edges"] / 4057 < 1.25
-    assert 0.8 < summary["car_component_junctions"] / reference.n_junctions < 1.25
-    imported = load_network(out, cache_dir=tmp_path)
-    assert imported.n_junctions == summary["car_component_junctions"]
-    # the car components cover the same town: their corners within 300 m
-    for net_a, net_b in ((imported, reference),):
-        pa, pb = net_a.projection, net_b.projection
-        assert isinstance(pa, GeoProjection) and isinstance(pb, GeoProjection)
-        ax0, ay0, ax1, ay1 = net_a.bounds
-        bx0, by0, bx1, by1 = net_b.bounds
-        assert _metres(pa.point_to_lonlat(ax0, ay0), pb.point_to_lonlat(bx0, by0)) < 300
-        assert _metres(pa.point_to_lonlat(ax1, ay1), pb.point_to_lonlat(bx1, by1)) < 300
-    assert summary["netconvert"]["warning_count"] == sum(summary["netconvert"]["warnings"].values())
+    assert 0.8 < summary["car_component_junctions"] / 1865 < 1.25
+    assert (
+        summary["car_component_edges"] + summary["car_edges_outside_component"]
+        == (summary["car_edges"])
+    )
+    log = summary["netconvert"]
+    assert log["warning_count"] == sum(log["warnings"].values()) > 0
 
 
 @pytest.mark.parametrize("name", sorted(EXPECTED))
@@ -157,7 +161,9 @@ def test_bad_files_are_refused_on_the_command_line(tmp_path: Path, name: str) ->
     source = tmp_path / f"{name}.osm.gz"
     source.write_bytes(bad_inputs()[name])
     target = tmp_path / "out" / "x.net.xml.gz"
-    out = cli("import-osm", str(source), "-o", str(target), "--max-bytes", str(4 * MIB))
+    out = cli(
+        "import-osm", str(source), "-o", str(target), "--max-bytes", str(4 * MIB), cache=tmp_path
+    )
     assert out.returncode == 2, out.stdout
     assert EXPECTED[name].lower() in out.stderr.lower() and "Traceback" not in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
