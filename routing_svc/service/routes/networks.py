@@ -49,8 +49,20 @@ async def read_limited(request: Request, limit: int) -> bytearray:
     return data
 
 
+PROBLEM_CONTENT = {"application/problem+json": {"schema": {"type": "object"}}}
+
 UPLOAD_RESPONSES: dict[int | str, dict[str, Any]] = {
     200: {"description": "The network is already known under this id with the same content."},
+    413: {
+        "description": "The upload, or its decompressed content, is larger than the limit.",
+        "content": PROBLEM_CONTENT,
+    },
+    422: {
+        "description": "Not a usable SUMO network or OpenStreetMap extract: malformed or "
+        "hostile XML, a corrupt gzip stream, another root element, or an extract from "
+        "which netconvert builds no road network.",
+        "content": PROBLEM_CONTENT,
+    },
 }
 
 
@@ -62,7 +74,13 @@ async def upload_network(
     service: Annotated[FleetService, Depends(fleet_service)],
     name: Annotated[Identifier | None, Query()] = None,
 ) -> dict[str, Any]:
-    """Upload a SUMO ``.net.xml`` or ``.net.xml.gz``; it is checked, compiled and kept.
+    """Upload a SUMO ``.net.xml`` or ``.net.xml.gz``, or an OpenStreetMap extract
+    (``.osm``, ``.osm.xml``, plain or gzip); it is checked, compiled and kept.
+
+    An upload whose root element is ``<osm>`` is converted with SUMO's
+    netconvert and SUMO's recommended OpenStreetMap options (as
+    ``routing-svc import-osm``), under the same size and XML limits; the answer
+    is then the same as for the network it became.
 
     A network is identified by the SHA-256 of its plain XML, whether it was
     named at start-up or uploaded, gzipped or not. The same content under a
