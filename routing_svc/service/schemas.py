@@ -125,7 +125,15 @@ class FleetSpec(Strict):
     counting: Literal["vehicle", "fleet"] = "vehicle"
     annealing: AnnealingSpec | None = None
     seed: Annotated[int, Field(ge=0, le=2**63 - 1)] = 0
-    vehicles: Annotated[list[VehicleSpec], Field(min_length=1, max_length=10_000)]
+    vehicles: Annotated[
+        list[VehicleSpec],
+        Field(
+            min_length=1,
+            max_length=10_000,
+            description="The fleet's vehicles; their ids must be unique (a rule JSON Schema "
+            "cannot state for objects: a repeated id is a 422).",
+        ),
+    ]
     start: StartSpec | None = None
     reference_demand: DemandSpec | None = None
     rule: (
