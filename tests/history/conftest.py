@@ -64,7 +64,9 @@ def client(tmp_path: Path) -> Iterator[InProcessHistoryClient]:
     c.close()
 
 
-def fleet_at(edges: Sequence[tuple[str, float]], *, fleet_id: str = "f", rule: str = "paper") -> dict[str, Any]:
+def fleet_at(
+    edges: Sequence[tuple[str, float]], *, fleet_id: str = "f", rule: str = "paper"
+) -> dict[str, Any]:
     """A fleet spec on ``drt`` with one vehicle at each ``(edge, offset)``."""
     return {
         "id": fleet_id,
@@ -93,13 +95,15 @@ def live_server(tmp_path: Path) -> Iterator[Callable[[], str]]:
             s.bind(("127.0.0.1", 0))
             port = s.getsockname()[1]
         url = f"http://127.0.0.1:{port}"
-        log = (tmp_path / "server.log").open("ab")
         cmd = [
             sys.executable, "-m", "routing_svc.cli", "serve", "--port", str(port),
             "--net", f"drt={DRT}", "--no-demo", "--db", str(tmp_path / "server.db"),
             "--data-dir", str(tmp_path / "networks"), "--log-level", "warning",
         ]  # fmt: skip
-        process = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+        with (tmp_path / "server.log").open("ab") as log:
+            process = subprocess.Popen(
+                cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+            )
         processes.append(process)
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
@@ -63,7 +64,8 @@ def test_an_unsorted_file_is_replayed_in_time_order(
     tmp_path: Path, client: InProcessHistoryClient, drt: CompiledNetwork
 ) -> None:
     calls = random_calls(drt, 40, seed=2)  # random times, in file order
-    iso = [f"2024-03-0{1 + int(c['time']) % 3}T{int(c['time']) // 3600:02d}:{int(c['time']) % 3600 // 60:02d}:{int(c['time']) % 60:02d}" for c in calls]  # fmt: skip
+    start = datetime(2024, 3, 1, tzinfo=UTC)
+    iso = [(start + timedelta(seconds=int(c["time"]))).isoformat() for c in calls]
     path = write_csv(
         tmp_path / "calls.csv",
         ["time", "edge", "offset"],
@@ -71,7 +73,10 @@ def test_an_unsorted_file_is_replayed_in_time_order(
     )
     client.create_fleet(fleet_at([(calls[0]["edge"], 0.0)]))
     _import(client, path, "f", chunk_size=7)
-    expected = [(c["edge"], c["offset"]) for _, c in sorted(zip(iso, calls, strict=True), key=lambda p: p[0])]
+    expected = [
+        (c["edge"], c["offset"])
+        for _, c in sorted(zip(iso, calls, strict=True), key=lambda p: p[0])
+    ]
     assert expected != [(c["edge"], c["offset"]) for c in calls]
     assert _event_targets(client, "f") == expected
 
@@ -102,16 +107,43 @@ def test_refuse_imports_nothing_and_names_the_lines(
     assert client.get_fleet("f")["version"] == before["version"] + 6
 
 
-def test_refuse_on_the_command_line_exits_2_with_the_lines(tmp_path: Path, drt: CompiledNetwork) -> None:
+def test_refuse_on_the_command_line_exits_2_with_the_lines(
+    tmp_path: Path, drt: CompiledNetwork
+) -> None:
     path = _file_with_bad_rows(tmp_path, drt)
     db = str(tmp_path / "cli.db")
-    created = cli("history", "create-fleet", str(path), "--fleet", "f", "--net", "drt=drt", "--vehicles", "2", "--db", db, "--on-bad-row", "skip")  # fmt: skip
+    created = cli(
+        "history",
+        "create-fleet",
+        str(path),
+        "--fleet",
+        "f",
+        "--net",
+        "drt=drt",
+        "--vehicles",
+        "2",
+        "--db",
+        db,
+        "--on-bad-row",
+        "skip",
+    )
     assert created.returncode == 0, created.stderr
     assert [r["line"] for r in json.loads(created.stdout)["bad_rows"]] == [3, 5, 9]
     out = cli("history", "import", str(path), "--fleet", "f", "--db", db, "--quiet")
     assert out.returncode == 2
     assert all(f"line {n}:" in out.stderr for n in (3, 5, 7, 9))
-    again = cli("history", "import", str(path), "--fleet", "f", "--db", db, "--quiet", "--on-bad-row", "skip")  # fmt: skip
+    again = cli(
+        "history",
+        "import",
+        str(path),
+        "--fleet",
+        "f",
+        "--db",
+        db,
+        "--quiet",
+        "--on-bad-row",
+        "skip",
+    )
     assert again.returncode == 0, again.stderr
     summary = json.loads(again.stdout)
     assert summary["version_before"] == 1 and summary["version_after"] == 7
@@ -121,7 +153,11 @@ def test_a_rerun_after_a_crash_applies_each_chunk_once(
     tmp_path: Path, client: InProcessHistoryClient, drt: CompiledNetwork
 ) -> None:
     calls = random_calls(drt, 50, seed=4)
-    path = write_csv(tmp_path / "calls.csv", ["time", "edge", "offset"], [[c["time"], c["edge"], c["offset"]] for c in calls])  # fmt: skip
+    path = write_csv(
+        tmp_path / "calls.csv",
+        ["time", "edge", "offset"],
+        [[c["time"], c["edge"], c["offset"]] for c in calls],
+    )
     client.create_fleet(fleet_at([(calls[0]["edge"], 0.0), (calls[1]["edge"], 0.0)]))
     # the first chunk went through before the crash
     table = read_calls(path)
