@@ -55,6 +55,9 @@ class HistoryClient(FleetClient, Protocol):
 class InProcessHistoryClient(InProcessFleetClient):
     """The in-process client with the batch route's domain call."""
 
+    def __enter__(self) -> InProcessHistoryClient:
+        return self
+
     def post_batch(
         self, fleet_id: str, targets: list[dict[str, Any]], *, idempotency_key: str
     ) -> tuple[list[dict[str, Any]], int]:
