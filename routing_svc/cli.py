@@ -23,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "simulate": ("routing_svc.simulate", "offline SA run with the gap to the optimum"),
     "cosim": ("routing_svc.sim.command", "SUMO co-simulation of the fleet in traffic"),
     "paper": ("routing_svc.paper.command", "the paper's other scenarios as experiments"),
+    "history": ("routing_svc.history.command", "import a history of calls; report service levels"),
 }
 
 
