@@ -34,6 +34,7 @@ from routing_svc.errors import InvalidInput, InvalidNetwork, PayloadTooLarge
 from routing_svc.network.cache import load_network
 from routing_svc.network.identity import network_sha256
 from routing_svc.network.safe_xml import XmlScreen, plain_xml_chunks
+from routing_svc.network.sumo_tools import sumo_tool
 
 __all__ = [
     "DEFAULT_MAX_OSM_BYTES",
@@ -251,21 +252,6 @@ def looks_like_osm(data: bytes | bytearray) -> bool:
     return screen.callbacks.root == "osm"
 
 
-def _sumo_tool(name: str) -> tuple[str, dict[str, str], Path]:
-    """The command, environment and home of a SUMO tool of the installed eclipse-sumo."""
-    from routing_svc.nets import sumo_home
-
-    home = sumo_home()
-    if home is None or not (home / "bin" / name).is_file():
-        raise InvalidNetwork(f"SUMO's {name} is not installed (no eclipse-sumo, no $SUMO_HOME)")
-    env = {**os.environ, "SUMO_HOME": str(home)}
-    proj = home / "data" / "proj"
-    if proj.is_dir():
-        env.setdefault("PROJ_DATA", str(proj))
-        env.setdefault("PROJ_LIB", str(proj))
-    return str(home / "bin" / name), env, home
-
-
 def run_netconvert(osm: Path, output: Path, *, cars_only: bool = False) -> NetconvertLog:
     """Convert the screened ``osm`` file into ``output`` (``.net.xml.gz``), both in one folder.
 
@@ -277,7 +263,8 @@ def run_netconvert(osm: Path, output: Path, *, cars_only: bool = False) -> Netco
     InvalidNetwork
         If netconvert fails or writes no network.
     """
-    binary, env, home = _sumo_tool("netconvert")
+    binary, env = sumo_tool("netconvert")
+    home = Path(env["SUMO_HOME"])
     typemaps = ",".join(str(home / "data" / "typemap" / t) for t in TYPEMAPS)
     command = [
         binary,
