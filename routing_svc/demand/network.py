@@ -2,9 +2,7 @@
 
 Every constructor cuts each edge into ``k = ceil(length / spacing)`` equal
 pieces and puts one atom at the middle of each piece; the atom carries the
-demand of its piece. With the default spacing of 20 m the DRT district that
-ships with SUMO (``tools/game/DRT/osm.net.xml``, about 37 km of car roads)
-gets about 2,300 atoms.
+demand of its piece (default spacing 20 m).
 
 - :func:`uniform_by_length`: demand per metre of road is constant, so an
   atom's mass is its piece length.

@@ -175,7 +175,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                     feeder = asyncio.create_task(feed_demo_targets(service, settings.demo_rate))
             # What start-up built (modules, networks, the app) lives as long as the
             # process: kept out of the cyclic garbage collector's full passes, which
-            # otherwise scan it all and stall the event loop for 50 to 150 ms under load.
+            # otherwise scan it all and stall the event loop under load.
             gc.collect()
             gc.freeze()
             yield

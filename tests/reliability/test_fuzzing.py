@@ -31,7 +31,7 @@ from schemathesis.config import SchemathesisConfig
 from schemathesis.schemas import BaseSchema
 
 from tests.reliability.conftest import Server, scaled
-from tests.reliability.workload import fleet_body
+from tests.helpers import fleet_body
 
 DEFAULT_SEED = 20261125
 SEED = int(os.environ.get("ROUTING_SVC_FUZZ_SEED", str(DEFAULT_SEED)))
