@@ -30,8 +30,8 @@ from hypothesis import HealthCheck, seed, settings
 from schemathesis.config import SchemathesisConfig
 from schemathesis.schemas import BaseSchema
 
-from tests.reliability.conftest import Server, scaled
 from tests.helpers import fleet_body
+from tests.reliability.conftest import Server, scaled
 
 DEFAULT_SEED = 20261125
 SEED = int(os.environ.get("ROUTING_SVC_FUZZ_SEED", str(DEFAULT_SEED)))
