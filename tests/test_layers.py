@@ -63,12 +63,8 @@ def import_graph(package: Path) -> nx.DiGraph:
                     parent = here.split(".")[: len(here.split(".")) - node.level + 1]
                     base = ".".join([*parent, base] if base else parent)
                 if base == root or base.startswith(root + "."):
-                    targets = [
-                        f"{base}.{alias.name}"
-                        if f"{base}.{alias.name}" in modules
-                        else owner(base)
-                        for alias in node.names
-                    ]
+                    names = [f"{base}.{alias.name}" for alias in node.names]
+                    targets = [name if name in modules else owner(base) for name in names]
             for target in targets:
                 if target is not None and target != module:
                     graph.add_edge(module, target)
