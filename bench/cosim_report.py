@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from routing_svc.optimum import MAX_SITES
 from routing_svc.sim import CosimResult, CosimSpec, parse_policies, run_cosim
 from routing_svc.sim.plots import write_figures
 
@@ -400,7 +401,7 @@ from that command. Figures: `docs/figures/cosim/`, all summaries:
     (random edges, drawn uniformly by length; shared by `sa`, `sa-cold`, `static` and
     SUMO's policies).
   - `optimum`: the same dispatch, positions frozen at the best-known p-median of the
-    true distribution (`routing_svc.optimum`, 1500 candidate sites; for incidents the
+    true distribution (`routing_svc.optimum`, {max_sites} candidate sites; for incidents the
     hindsight p-median of the realised incidents).
   - `sumo-stop` / `sumo-circling`: SUMO's taxi device alone, `greedy` dispatch every
     second, idle algorithm `stop` or `randomCircling`.
@@ -689,7 +690,7 @@ def _render(
     command = "python bench/cosim_report.py"
     if left_out:
         command += " --only " + ",".join(facts)
-    text = INTRO.format(runtime=runtime, history=history, command=command)
+    text = INTRO.format(runtime=runtime, history=history, command=command, max_sites=MAX_SITES)
     headline = [
         "## Headline: mean SUMO-measured wait (s), mean of the seeds",
         "",

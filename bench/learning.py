@@ -45,7 +45,7 @@ from routing_svc.demand import DemandDistribution
 from routing_svc.demand.network import hotspot_mixture
 from routing_svc.nets import resolve_network
 from routing_svc.network import RoadSpace, load_network
-from routing_svc.optimum import candidate_sites, expected_cost, solve_pmedian
+from routing_svc.optimum import MAX_SITES, expected_cost, solve_demand, solve_pmedian
 from routing_svc.sa import Fleet, Objective, Rule, Vehicle, learning_config
 from routing_svc.types import FloatArray, NetPosition
 
@@ -62,7 +62,6 @@ NETWORKS = {
 CHECKPOINTS = (300, 1000, 3000, 10000, 30000)
 SHIFT_AT = 10000
 AFTER_SHIFT = (1000, 5000)
-MAX_SITES = 1500
 GOALS: dict[str, Any] = {
     "cold": {"3000": 0.05, "30000": 0.02},
     "warm_every": 0.05,
@@ -92,10 +91,8 @@ class Instance:
 def optimum_of(
     space: RoadSpace, demand: DemandDistribution[NetPosition], n: int
 ) -> tuple[tuple[float, list[NetPosition]], FloatArray, list[NetPosition]]:
-    sites = candidate_sites(space.network, demand, max_sites=MAX_SITES)
-    matrix = space.cost_matrix(sites, list(demand.positions))
-    solution = solve_pmedian(matrix, np.asarray(demand.weights), n)
-    return (solution.objective, [sites[i] for i in solution.sites]), matrix, sites
+    best = solve_demand(space, demand, n)
+    return (best.objective, best.positions), best.matrix, best.sites
 
 
 def instance(net: str, n: int, seed: int) -> Instance:

@@ -21,7 +21,7 @@ import numpy as np
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput
-from routing_svc.optimum import expected_cost, solve_pmedian
+from routing_svc.optimum import expected_cost, solve_demand
 from routing_svc.sa import (
     DEFAULT_RULE,
     Annealing,
@@ -36,11 +36,15 @@ from routing_svc.sa import (
 
 @dataclass(frozen=True)
 class Scenario:
-    """A space, its demand, the candidate sites of the optimum and the start positions."""
+    """A space, its demand, the candidate sites of the optimum and the start positions.
+
+    ``sites`` is ``None`` on a road network: the optimum's candidate sites are then
+    :func:`routing_svc.optimum.solve_demand`'s (demand atoms and edge ends).
+    """
 
     space: Any
     demand: DemandDistribution[Any]
-    sites: list[Any]
+    sites: list[Any] | None
     starts: list[Any]
     describe: Any
 
@@ -52,7 +56,6 @@ def network_scenario(
     from routing_svc.demand.spec import network_demand, parse_demand_spec
     from routing_svc.nets import resolve_network
     from routing_svc.network import RoadSpace, load_network
-    from routing_svc.optimum import candidate_sites
     from routing_svc.types import NetPosition
 
     network = load_network(resolve_network(net))
@@ -60,13 +63,12 @@ def network_scenario(
     dist = network_demand(network, parse_demand_spec(demand), rng=rng)
     edges = rng.choice(network.n_edges, size=vehicles, replace=vehicles > network.n_edges)
     starts = [NetPosition(int(e), 0.0) for e in edges]
-    sites = candidate_sites(network, dist, max_sites=1500)
 
     def describe(p: NetPosition) -> dict[str, Any]:
         x, y = space.xy(p)
         return {"edge": network.edge_ids[p.edge], "offset": p.offset, "x": x, "y": y}
 
-    return Scenario(space, dist, list(sites), starts, describe)
+    return Scenario(space, dist, None, starts, describe)
 
 
 def plane_scenario(*, demand: str, vehicles: int, rng: np.random.Generator) -> Scenario:
@@ -151,8 +153,7 @@ def run_simulation(
         )
 
     started = time.perf_counter()
-    matrix = space.cost_matrix(scenario.sites, list(scenario.demand.positions)) ** objective.power
-    optimum = solve_pmedian(matrix, np.asarray(scenario.demand.weights), n)
+    optimum = solve_demand(space, scenario.demand, n, sites=scenario.sites, power=objective.power)
     optimum_seconds = time.perf_counter() - started
     marks = sorted({round(x) for x in np.linspace(used, targets, checkpoints + 1)})
     curve = [{"targets": used, "expected_cost": value()}]
@@ -197,9 +198,9 @@ def run_simulation(
         "final_expected_cost": final,
         "optimum": {
             "objective": optimum.objective,
-            "method": optimum.method,
-            "proven_optimal": optimum.proven_optimal,
-            "sites": len(scenario.sites),
+            "method": optimum.solution.method,
+            "proven_optimal": optimum.solution.proven_optimal,
+            "sites": len(optimum.sites),
             "seconds": optimum_seconds,
         },
         "gap": (final - optimum.objective) / optimum.objective,
@@ -230,10 +231,10 @@ def starting_positions(
         sites = list(dict.fromkeys(sample))
         if len(sites) < n:
             raise InvalidInput(f"the prior sample has fewer than {n} distinct targets")
-        weights = np.array([sample.count(z) for z in sites], dtype=np.float64)
-        matrix = scenario.space.cost_matrix(sites, sites) ** power
-        solution = solve_pmedian(matrix, weights / weights.sum(), n)
-        return [sites[i] for i in solution.sites], len(sample)
+        counts = [sample.count(z) for z in sites]
+        prior = DemandDistribution.from_masses(f"prior:{len(sample)}", sites, counts)
+        best = solve_demand(scenario.space, prior, n, sites=sites, power=power)
+        return best.positions, len(sample)
     raise InvalidInput(f"--start must be random, first or prior:N with N >= {n}, got {start!r}")
 
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 from pathlib import Path
 from typing import Any
 
@@ -29,9 +28,9 @@ from routing_svc.errors import InvalidInput
 from routing_svc.nets import resolve_network
 from routing_svc.network import CompiledNetwork, RoadSpace, load_network
 from routing_svc.network.costs import CostKind
-from routing_svc.optimum.candidates import candidate_sites, distinct_rows
 from routing_svc.optimum.evaluate import expected_cost
-from routing_svc.optimum.pmedian import Method, solve_pmedian
+from routing_svc.optimum.pmedian import Method
+from routing_svc.optimum.solve import solve_demand
 from routing_svc.types import NetPosition
 
 _UNITS = {"length": "m", "time": "s"}
@@ -141,24 +140,17 @@ def optimum_report(
     recipe = parse_demand_spec(demand)
     distribution = network_demand(network, recipe, rng=np.random.default_rng(seed))
     space = RoadSpace(network, cost=_COSTS[cost])
-    candidates = candidate_sites(network, distribution, max_sites=max_sites)
-    matrix = space.cost_matrix(candidates, list(distribution.positions))
-    distinct = distinct_rows(matrix)
-    if vehicles > distinct.size:
-        raise InvalidInput(
-            f"--vehicles {vehicles} exceeds the {distinct.size} distinct candidate sites"
-        )
-    started = time.perf_counter()
-    solution = solve_pmedian(
-        matrix[distinct],
-        distribution.weights,
+    best = solve_demand(
+        space,
+        distribution,
         vehicles,
+        max_sites=max_sites,
+        distinct=True,
         method=_METHODS[method],
         time_limit=time_limit,
     )
-    seconds = time.perf_counter() - started
-    positions = [candidates[int(distinct[i])] for i in solution.sites]
-    value = expected_cost(space, positions, np.ones(len(positions)), distribution)
+    solution = best.solution
+    value = expected_cost(space, best.positions, np.ones(len(best.positions)), distribution)
     return {
         "network": Path(path).name,
         "demand": distribution.name,
@@ -167,11 +159,11 @@ def optimum_report(
         "vehicles": vehicles,
         "objective": value,
         "lower_bound": solution.lower_bound,
-        "positions": [_describe(space, network, p) for p in positions],
+        "positions": [_describe(space, network, p) for p in best.positions],
         "method": solution.method,
         "proven_optimal": solution.proven_optimal,
-        "seconds": seconds,
-        "n_sites": int(distinct.size),
+        "seconds": solution.seconds,
+        "n_sites": len(best.sites),
         "n_demand": len(distribution),
         "seed": seed,
     }

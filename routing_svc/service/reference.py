@@ -21,14 +21,13 @@ gap uses the same objective. Fleets stored without ``kind`` are p-median ones.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.demand.spec import network_demand, recipe_from_reference
-from routing_svc.errors import InvalidInput
-from routing_svc.optimum import candidate_sites, expected_cost, solve_pmedian
+from routing_svc.optimum import MAX_SITES, candidate_sites, expected_cost, solve_demand
 from routing_svc.optimum.heterogeneous import (
     RequirementClass,
     heterogeneous_cost,
@@ -36,15 +35,29 @@ from routing_svc.optimum.heterogeneous import (
     is_heterogeneous,
     requirement_mix,
 )
+from routing_svc.sa import Fleet
 from routing_svc.service.networks import NetworkEntry
 from routing_svc.service.schemas import DemandSpec
 from routing_svc.types import NetPosition
 
-if TYPE_CHECKING:
-    from routing_svc.service.runtime import FleetRuntime
 
-MAX_SITES = 1500
-"""Candidate sites kept for the optimum (subsampled deterministically beyond)."""
+class ReferencedFleet(Protocol):
+    """What :func:`expected_cost_now` reads of a fleet's runtime
+    (:class:`routing_svc.service.runtime.FleetRuntime`, which imports this module)."""
+
+    @property
+    def entry(self) -> NetworkEntry: ...
+
+    @property
+    def cost_kind(self) -> str: ...
+
+    @property
+    def fleet(self) -> Fleet[NetPosition]: ...
+
+    @property
+    def reference(self) -> dict[str, Any] | None: ...
+
+    def reference_distribution(self) -> DemandDistribution[NetPosition]: ...
 
 
 def build_demand(entry: NetworkEntry, spec: dict[str, Any]) -> DemandDistribution[NetPosition]:
@@ -64,19 +77,13 @@ def solve_reference(
     power: float,
 ) -> tuple[list[NetPosition], dict[str, Any]]:
     """The p-median (power 1) or p-power-median of ``demand`` with ``vehicles`` sites."""
-    space = entry.space(cost)
-    sites = candidate_sites(entry.network, demand, max_sites=MAX_SITES)
-    if len(sites) < vehicles:
-        raise InvalidInput(f"only {len(sites)} candidate sites for {vehicles} vehicles")
-    matrix = space.cost_matrix(list(sites), list(demand.positions)) ** power
-    solution = solve_pmedian(matrix, np.asarray(demand.weights), vehicles)
-    chosen = [sites[i] for i in solution.sites]
-    return chosen, {
-        "objective": solution.objective,
-        "method": solution.method,
-        "proven_optimal": solution.proven_optimal,
-        "seconds": solution.seconds,
-        "sites": len(sites),
+    best = solve_demand(entry.space(cost), demand, vehicles, power=power)
+    return best.positions, {
+        "objective": best.objective,
+        "method": best.solution.method,
+        "proven_optimal": best.solution.proven_optimal,
+        "seconds": best.solution.seconds,
+        "sites": len(best.sites),
     }
 
 
@@ -133,7 +140,7 @@ def optimum_start(
     return positions
 
 
-def expected_cost_now(runtime: FleetRuntime) -> float:
+def expected_cost_now(runtime: ReferencedFleet) -> float:
     """Exact expected cost of the fleet's current positions under its reference demand."""
     assert runtime.reference is not None
     demand = runtime.reference_distribution()

@@ -30,6 +30,7 @@ from routing_svc.network import RoadSpace
 from routing_svc.sa import Consolidation, Fleet, FleetConfig, Vehicle
 from routing_svc.service.canonical import TargetResult, dumps, target_payload
 from routing_svc.service.networks import NetworkEntry
+from routing_svc.service.reference import build_demand, expected_cost_now
 from routing_svc.types import NetPosition
 
 
@@ -249,8 +250,6 @@ class FleetRuntime:
 
     def reference_distribution(self) -> DemandDistribution[NetPosition]:
         """The reference demand's atoms (built once from the stored spec)."""
-        from routing_svc.service.reference import build_demand
-
         assert self.reference is not None
         if self._reference_distribution is None:
             self._reference_distribution = build_demand(self.entry, self.reference["demand"])
@@ -259,8 +258,6 @@ class FleetRuntime:
     def _optimum_gap(self) -> dict[str, Any] | None:
         if self.reference is None:
             return None
-        from routing_svc.service.reference import expected_cost_now
-
         optimum = float(self.reference["optimum"]["objective"])
         value = expected_cost_now(self)
         return {

@@ -3,6 +3,7 @@
 ::
 
     run_cosim(CosimSpec(network="drt", vehicles=10, seeds=(0, 1, 2)), out_dir=...)
+        spec.py       CosimSpec: what to simulate
         prepare.py    background traffic (randomTrips), requests, starts, optimum
         run.py        one policy in one SUMO process -> PolicyRun (waits from SUMO)
         dispatcher.py reservations -> fleet service -> dispatchTaxi / park at reference

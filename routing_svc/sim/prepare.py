@@ -20,9 +20,9 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -31,6 +31,7 @@ from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork, RoadSpace, load_network
 from routing_svc.sim.backend import make_backend
 from routing_svc.sim.inputs import FleetVehicle, Request, random_trips, sumo_options, write_persons
+from routing_svc.sim.measures import PolicyRun
 from routing_svc.sim.requests import Destinations, Phase, incident_requests, person_requests
 from routing_svc.sim.run import process_map
 from routing_svc.sim.scenario import (
@@ -45,12 +46,13 @@ from routing_svc.sim.scenario import (
     solve_optimum,
     start_positions,
 )
+from routing_svc.sim.spec import CosimSpec
 from routing_svc.types import NetPosition
 
-if TYPE_CHECKING:
-    from routing_svc.sim.experiment import CosimResult, CosimSpec
-
 __all__ = ["IncidentJob", "Prepared", "SeedInputs", "prepare_seeds", "record_incidents"]
+
+Curve = list[tuple[float, float]]
+"""``(time, exact expected free-flow wait)`` points."""
 
 #: randomTrips seed offset of the traffic in which incident history is recorded.
 HISTORY_SEED_OFFSET = 1000
@@ -170,13 +172,18 @@ class Prepared:
             return demand_at(self.phases, time)
         return empirical_demand(self.network, seed.requests)
 
-    def evaluate(self, result: CosimResult) -> None:
-        """Fill ``result.curves`` and ``result.optimum_curve`` (exact expected waits)."""
+    def evaluate(
+        self, runs: Sequence[PolicyRun]
+    ) -> tuple[dict[tuple[str, int], Curve], dict[int, Curve]]:
+        """The exact expected waits over time of the runs' recorded reference positions,
+        per ``(policy, seed)``, and of the optimum for the demand in force, per seed."""
+        curves: dict[tuple[str, int], Curve] = {}
+        optimum_curve: dict[int, Curve] = {}
         by_seed = {s.seed: s for s in self.seeds}
-        for run in result.runs:
+        for run in runs:
             if run.snapshots:
                 seed = by_seed[run.seed]
-                result.curves[(run.policy, run.seed)] = [
+                curves[(run.policy, run.seed)] = [
                     (t, expected_wait(self.space, self._decode(pos), self._demand(seed, t)))
                     for t, pos in run.snapshots
                 ]
@@ -188,15 +195,16 @@ class Prepared:
         for seed in self.seeds:
             if seed.optimum is None:
                 continue
-            times = sorted({t for r in result.runs if r.seed == seed.seed for t, _ in r.snapshots})
+            times = sorted({t for r in runs if r.seed == seed.seed for t, _ in r.snapshots})
             if not phase_optima:
-                result.optimum_curve[seed.seed] = [(t, seed.optimum.expected_cost) for t in times]
+                optimum_curve[seed.seed] = [(t, seed.optimum.expected_cost) for t in times]
                 continue
             first = min(phase_optima)
-            result.optimum_curve[seed.seed] = [
+            optimum_curve[seed.seed] = [
                 (t, phase_optima[max((s for s in phase_optima if s <= t), default=first)])
                 for t in times
             ]
+        return curves, optimum_curve
 
 
 def _phases(spec: CosimSpec, network: CompiledNetwork) -> list[Phase]:

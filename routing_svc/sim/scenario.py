@@ -26,6 +26,7 @@ from routing_svc.demand.profile import HourlyProfile
 from routing_svc.demand.spec import network_demand, parse_demand_spec
 from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork, RoadSpace
+from routing_svc.optimum.solve import solve_demand
 from routing_svc.sim.inputs import FleetVehicle, Request
 from routing_svc.sim.requests import Phase
 from routing_svc.types import NetPosition
@@ -41,9 +42,6 @@ __all__ = [
     "solve_optimum",
     "start_positions",
 ]
-
-#: Candidate sites offered to the p-median solver (the solver is exact up to 500).
-MAX_SITES = 1500
 
 
 @dataclass(frozen=True, slots=True)
@@ -125,17 +123,13 @@ def solve_optimum(
 ) -> Optimum:
     """The exact or best-known p-median of ``demand`` (routing objective).
 
-    Candidate sites are ``routing_svc.optimum.candidate_sites`` (at most
-    :data:`MAX_SITES`); costs are the space's (free-flow seconds for ``time``).
+    Candidate sites, costs and solver are :func:`routing_svc.optimum.solve.solve_demand`'s
+    (at most :data:`~routing_svc.optimum.solve.MAX_SITES` sites; costs are the space's,
+    free-flow seconds for ``time``).
     """
-    from routing_svc.optimum.candidates import candidate_sites
-    from routing_svc.optimum.pmedian import solve_pmedian
-
-    sites = list(candidate_sites(space.network, demand, max_sites=MAX_SITES))
-    costs = space.cost_matrix(sites, list(demand.positions))
-    solution = solve_pmedian(costs, np.asarray(demand.weights), vehicles)
-    positions = tuple(sorted(sites[i] for i in solution.sites))
-    return Optimum(positions, solution.objective, solution.method, solution.proven_optimal)
+    best = solve_demand(space, demand, vehicles)
+    positions = tuple(sorted(best.positions))
+    return Optimum(positions, best.objective, best.solution.method, best.solution.proven_optimal)
 
 
 def expected_wait(
