@@ -28,15 +28,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.sparse as sp
 
+from routing_svc.sa.interchange_kernels import best_swap, lazy_greedy, nearest_two
 from routing_svc.types import FloatArray, IntArray
 
 #: A swap must lower the objective by more than this fraction to be applied.
 SWAP_TOLERANCE = 1e-12
-
-#: Rows of the cost matrix processed at once (bounds temporary memory).
-BLOCK_ROWS = 256
 
 #: The variable neighbourhood search stops after this many shakes in a row without a gain.
 SHAKES_WITHOUT_GAIN = 20
@@ -115,51 +112,57 @@ def neighbourhood_search(
 
 
 def greedy(c: FloatArray, w: FloatArray, p: int) -> IntArray:
-    """Open sites one at a time, each time the one that lowers ``F`` most."""
-    n = c.shape[0]
-    best = np.full(c.shape[1], np.inf)
-    is_open = np.zeros(n, dtype=bool)
-    for _ in range(p):
-        totals = np.empty(n)
-        for lo in range(0, n, BLOCK_ROWS):
-            totals[lo : lo + BLOCK_ROWS] = np.minimum(c[lo : lo + BLOCK_ROWS], best) @ w
-        totals[is_open] = np.inf
-        pick = int(np.argmin(totals))
-        is_open[pick] = True
-        best = np.minimum(best, c[pick])
-    return np.flatnonzero(is_open).astype(np.int64)
+    """Open sites one at a time, each time the one that lowers ``F`` most.
+
+    Lazy (Minoux's accelerated greedy, :func:`routing_svc.sa.interchange_kernels.lazy_greedy`):
+    only the sites whose bound could beat the best are priced again. Among sites of
+    equal ``F`` after opening, the lowest index opens.
+
+    Returns
+    -------
+    IntArray
+        The ``p`` sites in ascending order.
+    """
+    c, w = _contiguous(c, w)
+    return np.sort(lazy_greedy(c, w, int(p)))
 
 
 def fast_interchange(c: FloatArray, w: FloatArray, sites: IntArray) -> IntArray:
-    """Apply best-improvement swaps from ``sites`` until none lowers ``F``."""
+    """Apply best-improvement swaps from ``sites`` until none lowers ``F``.
+
+    Each pass (:func:`routing_svc.sa.interchange_kernels.best_swap`) finds the swap of
+    least ``gain_i + loss_ir`` (the first in the order of closed sites, then of
+    positions in ``sites``); it is applied if it lowers ``F`` by more than
+    :data:`SWAP_TOLERANCE` of ``F`` and the exactly summed ``F`` of the result is lower.
+    The entering site takes the leaving one's position.
+    """
+    c, w = _contiguous(c, w)
     n, m = c.shape
     open_sites = np.array(sites, dtype=np.int64)
     p = open_sites.size
-    atoms = np.arange(m)
-    current = _value(c, w, open_sites)
+    is_open = np.zeros(n, dtype=bool)
+    is_open[open_sites] = True
+    c1, c2, a1 = np.empty(m), np.empty(m), np.empty(m, dtype=np.int64)
+    n1, n2, b1 = np.empty(m), np.empty(m), np.empty(m, dtype=np.int64)
+    nearest_two(c, open_sites, c1, c2, a1)
+    current = math.fsum((w * c1).tolist())
     while True:
-        sub = c[open_sites]
-        order = np.argsort(sub, axis=0, kind="stable")
-        a1 = order[0]
-        c1 = sub[a1, atoms]
-        c2 = sub[order[1], atoms] if p > 1 else np.full(m, np.inf)
-        owner = sp.csr_array((w, (a1, atoms)), shape=(p, m))  # w_j in row a1_j
-        delta = np.empty((n, p))
-        for lo in range(0, n, BLOCK_ROWS):
-            block = c[lo : lo + BLOCK_ROWS]
-            gain = np.minimum(block - c1, 0.0) @ w
-            fallback = np.maximum(np.minimum(block, c2) - c1, 0.0)
-            delta[lo : lo + BLOCK_ROWS] = gain[:, None] + (owner @ fallback.T).T
-        delta[open_sites] = np.inf
-        enter, leave = divmod(int(np.argmin(delta)), p)
-        if not delta[enter, leave] < -SWAP_TOLERANCE * current:
+        enter, leave, delta = best_swap(c, w, is_open, c1, c2, a1, p)
+        if enter < 0 or not delta < -SWAP_TOLERANCE * current:
             return open_sites
         candidate = open_sites.copy()
         candidate[leave] = enter
-        value = _value(c, w, candidate)
+        nearest_two(c, candidate, n1, n2, b1)
+        value = math.fsum((w * n1).tolist())
         if not value < current:
             return open_sites
+        is_open[open_sites[leave]], is_open[enter] = False, True
         open_sites, current = candidate, value
+        c1, c2, a1, n1, n2, b1 = n1, n2, b1, c1, c2, a1
+
+
+def _contiguous(c: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
+    return np.ascontiguousarray(c, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64)
 
 
 def _value(c: FloatArray, w: FloatArray, sites: IntArray) -> float:
