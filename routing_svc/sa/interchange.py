@@ -1,18 +1,22 @@
 """The p-median heuristic: greedy addition, Whitaker's fast interchange, neighbourhood search.
 
 Greedy addition opens, ``p`` times, the site that lowers
-``F(S) = sum_j w_j min_{i in S} c_ij`` most. The fast interchange of Whitaker
-(1983), in the vectorised form of Hansen & Mladenovic (1997), then evaluates
-*every* swap (open ``i``, close ``r``) in one ``O(n_sites * n_demand)`` pass
-using the cheapest (``c1_j``, at site ``a1_j``) and second cheapest (``c2_j``)
-open site of every atom:
+``F(S) = sum_j w_j min_{i in S} c_ij`` most; lazily (Minoux 1978): a site's
+last decrease bounds its next one, so only sites whose bound could win are
+priced again. The fast interchange of Whitaker (1983), as in Hansen &
+Mladenovic (1997), then prices every swap (open ``i``, close ``r``) in one
+``O(n_sites * n_demand)`` pass using the cheapest (``c1_j``, at site
+``a1_j``) and second cheapest (``c2_j``) open site of every atom:
 
 - ``gain_i = sum_j w_j min(c_ij - c1_j, 0)``: atoms that move to ``i``;
 - ``loss_ir = sum_{j: a1_j = r} w_j max(min(c_ij, c2_j) - c1_j, 0)``: atoms of
   ``r`` that fall back to ``i`` or to their second site;
 
 and applies the best swap ``gain_i + loss_ir`` while it is negative. The
-result is a local optimum of the Teitz-Bart (1968) swap neighbourhood.
+result is a local optimum of the Teitz-Bart (1968) swap neighbourhood. Since
+``loss_ir >= 0``, a site whose gain (or a lower bound of it, carried from the
+last pass) cannot beat the best swap so far is not priced further. Both run as
+numba kernels (:mod:`routing_svc.sa.interchange_kernels`).
 
 A local optimum of the swap neighbourhood can still be a little above the
 optimum (0.85 % on one of the DRT benchmark instances). The variable
@@ -29,7 +33,7 @@ import math
 
 import numpy as np
 
-from routing_svc.sa.interchange_kernels import best_swap, lazy_greedy, nearest_two
+from routing_svc.sa.interchange_kernels import best_swap, lazy_greedy, nearest_two, relax_bounds
 from routing_svc.types import FloatArray, IntArray
 
 #: A swap must lower the objective by more than this fraction to be applied.
@@ -124,6 +128,8 @@ def greedy(c: FloatArray, w: FloatArray, p: int) -> IntArray:
         The ``p`` sites in ascending order.
     """
     c, w = _contiguous(c, w)
+    if not 0 <= p <= c.shape[0]:
+        raise ValueError(f"greedy addition opens 0 to {c.shape[0]} sites, not {p}")
     return np.sort(lazy_greedy(c, w, int(p)))
 
 
@@ -140,15 +146,20 @@ def fast_interchange(c: FloatArray, w: FloatArray, sites: IntArray) -> IntArray:
     n, m = c.shape
     open_sites = np.array(sites, dtype=np.int64)
     p = open_sites.size
+    if p == 0:
+        raise ValueError("the fast interchange needs an open site")
     is_open = np.zeros(n, dtype=bool)
     is_open[open_sites] = True
+    bounds = np.where(is_open, np.inf, -np.inf)  # of the gains, see best_swap
+    exact = np.zeros(n, dtype=bool)
     c1, c2, a1 = np.empty(m), np.empty(m), np.empty(m, dtype=np.int64)
     n1, n2, b1 = np.empty(m), np.empty(m), np.empty(m, dtype=np.int64)
     nearest_two(c, open_sites, c1, c2, a1)
     current = math.fsum((w * c1).tolist())
     while True:
-        enter, leave, delta = best_swap(c, w, is_open, c1, c2, a1, p)
-        if enter < 0 or not delta < -SWAP_TOLERANCE * current:
+        limit = -SWAP_TOLERANCE * current
+        enter, leave, delta = best_swap(c, w, is_open, c1, c2, a1, p, bounds, exact, limit)
+        if enter < 0 or not delta < limit:
             return open_sites
         candidate = open_sites.copy()
         candidate[leave] = enter
@@ -156,7 +167,10 @@ def fast_interchange(c: FloatArray, w: FloatArray, sites: IntArray) -> IntArray:
         value = math.fsum((w * n1).tolist())
         if not value < current:
             return open_sites
-        is_open[open_sites[leave]], is_open[enter] = False, True
+        relax_bounds(bounds, exact, w, c1, n1)
+        closing = open_sites[leave]
+        is_open[closing], is_open[enter] = False, True
+        bounds[closing], bounds[enter] = -np.inf, np.inf
         open_sites, current = candidate, value
         c1, c2, a1, n1, n2, b1 = n1, n2, b1, c1, c2, a1
 

@@ -1,7 +1,9 @@
 """Compiled kernels of the p-median heuristic: lazy greedy addition and one interchange pass.
 
 Both work on a C-contiguous cost matrix ``c`` of shape ``(n_sites, n_demand)``
-and weights ``w >= 0``, and read ``c`` one row at a time.
+and weights ``w >= 0``, and read ``c`` one row at a time. Ties go to the
+lowest site index (then the lowest position), as ``np.argmin`` over the
+plain numpy forms of these rules would break them.
 
 Lazy greedy addition (Minoux 1978)
 ----------------------------------
@@ -22,20 +24,30 @@ lowest index among the largest decreases, i.e. among the smallest
 Interchange pass (Whitaker 1983)
 --------------------------------
 With ``c1_j`` (at position ``a1_j`` of the open sites) and ``c2_j`` the
-cheapest and second cheapest open cost of atom ``j``, a pass prices every swap
+cheapest and second cheapest open cost of atom ``j``, a pass prices the swaps
 (open the closed site ``i``, close the site at position ``r``) as
-``gain_i + loss_ir`` in one loop over ``j`` per closed site, with a
-length-``p`` accumulator for ``loss_i.``; see :mod:`routing_svc.sa.interchange`.
+``gain_i + loss_ir`` (see :mod:`routing_svc.sa.interchange`): ``gain_i`` in
+one loop over ``j``, the ``p`` losses of four sites in one loop over ``j``
+with a length-``p`` accumulator each. Every sum runs over ``j`` in ascending
+order, so every ``loss_ir`` is the sum scipy's sparse product formed.
+
+Since ``loss_ir >= 0``, a site whose gain is above the best change found so
+far (or not below the acceptance limit) cannot win; a lower bound of every
+gain is carried from pass to pass (:func:`relax_bounds`), the sites are
+visited from the lowest bound up and the pass stops at the first bound that
+cannot win. The swap returned is the same as with every site priced.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
 
 from routing_svc.types import BoolArray, FloatArray, IntArray
 
-__all__ = ["best_swap", "lazy_greedy", "nearest_two"]
+__all__ = ["best_swap", "gain_of", "lazy_greedy", "nearest_two", "relax_bounds"]
 
 
 @njit(cache=True)
@@ -148,31 +160,134 @@ def best_swap(
     c2: FloatArray,
     a1: IntArray,
     p: int,
+    bounds: FloatArray,
+    exact: BoolArray,
+    limit: float,
 ) -> tuple[int, int, float]:
-    """The swap ``(enter, leave)`` of least ``gain_enter + loss_enter,leave`` and its change.
+    """The swap ``(enter, leave)`` of least ``gain_enter + loss_enter,leave``, if below ``limit``.
 
-    Closed sites in ascending order, positions in ascending order, the first strict
-    minimum kept (``np.argmin`` over the row-major ``(n_sites, p)`` matrix of changes).
-    ``(-1, -1, inf)`` if every site is open.
+    Among equal changes the lowest closed site, then the lowest position wins (the first
+    minimum of ``np.argmin`` over the row-major ``(n_sites, p)`` matrix of changes).
+    ``c1``, ``c2``, ``a1`` are those of the ``p`` open sites (:func:`nearest_two`).
+
+    ``bounds`` holds a lower bound of every closed site's gain (``-inf``: none; ``+inf``
+    at open sites), the gain itself where ``exact``. As ``loss_ir >= 0``,
+    ``gain_i <= gain_i + loss_ir``: sites are visited from the lowest bound up and
+    the visit stops at a bound above the best change so far or at least ``limit``. A
+    visited site's gain is computed (and stored, exact) and its losses summed only if
+    its gain could still win. The result is the first minimum of the full matrix
+    whenever that minimum is below ``limit``; else possibly ``(-1, -1, inf)``.
     """
-    n, m = c.shape
-    loss = np.empty(p)
+    losses = np.empty((4, p))
+    rows = np.empty(4, dtype=np.int64)
+    pending = 0
     enter, leave, best = -1, -1, np.inf
-    for i in range(n):
-        if is_open[i]:
+    for i in np.argsort(bounds, kind="mergesort"):
+        if is_open[i] or bounds[i] > best or bounds[i] >= limit:
+            break
+        if not exact[i]:
+            bounds[i] = gain_of(c, w, c1, i)
+            exact[i] = True
+        if bounds[i] > best or bounds[i] >= limit:
             continue
-        gain = 0.0
-        loss[:] = 0.0
-        for j in range(m):
-            value = c[i, j]
-            if value < c1[j]:
-                gain += w[j] * (value - c1[j])
-            else:
-                fallback = min(value, c2[j]) - c1[j]
-                if fallback > 0.0:
-                    loss[a1[j]] += w[j] * fallback
-        for r in range(p):
-            delta = gain + loss[r]
-            if delta < best:
+        rows[pending] = i
+        pending += 1
+        if pending == 4:
+            _losses(c, w, c1, c2, a1, rows, pending, losses)
+            enter, leave, best = _best_of(rows, pending, bounds, losses, enter, leave, best)
+            pending = 0
+    _losses(c, w, c1, c2, a1, rows, pending, losses)
+    return _best_of(rows, pending, bounds, losses, enter, leave, best)
+
+
+@njit(cache=True, inline="always")
+def _best_of(
+    rows: IntArray,
+    count: int,
+    gains: FloatArray,
+    losses: FloatArray,
+    enter: int,
+    leave: int,
+    best: float,
+) -> tuple[int, int, float]:
+    """The first least ``gain_i + loss_ir`` of the swaps so far and of the ``count`` rows."""
+    for k in range(count):
+        i = rows[k]
+        for r in range(losses.shape[1]):
+            delta = gains[i] + losses[k, r]
+            if delta < best or (delta == best and (i < enter or (i == enter and r < leave))):
                 enter, leave, best = i, r, delta
     return enter, leave, best
+
+
+@njit(cache=True)
+def _losses(
+    c: FloatArray,
+    w: FloatArray,
+    c1: FloatArray,
+    c2: FloatArray,
+    a1: IntArray,
+    rows: IntArray,
+    count: int,
+    losses: FloatArray,
+) -> None:
+    """``losses[k, r] = loss_ir`` of ``i = rows[k]``, each summed over ``j`` in ascending
+    order; four rows in one loop over ``j`` (four independent sums)."""
+    losses[:count] = 0.0
+    m = c.shape[1]
+    if count == 4:
+        i0, i1, i2, i3 = rows[0], rows[1], rows[2], rows[3]
+        for j in range(m):
+            nearest, second, owner, weight = c1[j], c2[j], a1[j], w[j]
+            f0 = min(c[i0, j], second) - nearest
+            f1 = min(c[i1, j], second) - nearest
+            f2 = min(c[i2, j], second) - nearest
+            f3 = min(c[i3, j], second) - nearest
+            if f0 > 0.0:
+                losses[0, owner] += weight * f0
+            if f1 > 0.0:
+                losses[1, owner] += weight * f1
+            if f2 > 0.0:
+                losses[2, owner] += weight * f2
+            if f3 > 0.0:
+                losses[3, owner] += weight * f3
+        return
+    for k in range(count):
+        i = rows[k]
+        for j in range(m):
+            fallback = min(c[i, j], c2[j]) - c1[j]
+            if fallback > 0.0:
+                losses[k, a1[j]] += w[j] * fallback
+
+
+@njit(cache=True)
+def gain_of(c: FloatArray, w: FloatArray, c1: FloatArray, i: int) -> float:
+    """``gain_i = sum_j w_j min(c_ij - c1_j, 0)``, summed over ``j`` in ascending order."""
+    gain = 0.0
+    for j in range(c.shape[1]):
+        closer = c[i, j] - c1[j]
+        if closer < 0.0:
+            gain += w[j] * closer
+    return gain
+
+
+@njit(cache=True)
+def relax_bounds(
+    bounds: FloatArray, exact: BoolArray, w: FloatArray, before: FloatArray, after: FloatArray
+) -> None:
+    """Keep ``bounds`` lower bounds of the gains after the cheapest open costs went from
+    ``before`` to ``after``.
+
+    A term ``w_j min(c_ij - c1_j, 0)`` grows where ``c1_j`` falls and falls by at most
+    ``w_j (after_j - before_j)`` where it rises, so every gain falls by at most
+    ``rise = sum_j w_j max(after_j - before_j, 0)``; a relative ``1e-9`` more covers
+    the rounding of the sums.
+    """
+    rise = 0.0
+    for j in range(w.size):
+        if after[j] > before[j]:
+            rise += w[j] * (after[j] - before[j])
+    for i in range(bounds.size):
+        if math.isfinite(bounds[i]):
+            bounds[i] -= rise + 1e-9 * (abs(bounds[i]) + rise)
+        exact[i] = False

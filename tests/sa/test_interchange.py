@@ -83,9 +83,7 @@ def brute_force_greedy(c: FloatArray, w: FloatArray, p: int) -> list[int]:
     return sorted(chosen)
 
 
-def instance(
-    seed: int, *, integer: bool, zero_weights: bool
-) -> tuple[FloatArray, FloatArray, int]:
+def instance(seed: int, *, integer: bool, zero_weights: bool) -> tuple[FloatArray, FloatArray, int]:
     rng = np.random.default_rng(seed)
     n, m = int(rng.integers(2, 40)), int(rng.integers(1, 70))
     p = int(rng.integers(1, min(n, 9) + 1))
@@ -176,3 +174,13 @@ def test_every_site_open_and_a_single_site() -> None:
     assert greedy(c, w, 3).tolist() == [0, 1, 2]
     assert fast_interchange(c, w, np.array([2])).tolist() == [1]
     assert greedy(c, w, 1).tolist() == [1]
+
+
+def test_impossible_site_counts_are_refused() -> None:
+    c = np.ones((3, 2))
+    w = np.ones(2)
+    with pytest.raises(ValueError, match="greedy addition"):
+        greedy(c, w, 4)
+    with pytest.raises(ValueError, match="open site"):
+        fast_interchange(c, w, np.array([], dtype=np.int64))
+    assert greedy(c, w, 0).tolist() == []
