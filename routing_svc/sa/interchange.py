@@ -167,10 +167,11 @@ def fast_interchange(c: FloatArray, w: FloatArray, sites: IntArray) -> IntArray:
         value = math.fsum((w * n1).tolist())
         if not value < current:
             return open_sites
-        relax_bounds(bounds, exact, w, c1, n1)
+        relax_bounds(c, w, bounds, exact, c1, n1)
         closing = open_sites[leave]
         is_open[closing], is_open[enter] = False, True
         bounds[closing], bounds[enter] = -np.inf, np.inf
+        exact[closing] = exact[enter] = False
         open_sites, current = candidate, value
         c1, c2, a1, n1, n2, b1 = n1, n2, b1, c1, c2, a1
 

@@ -273,21 +273,38 @@ def gain_of(c: FloatArray, w: FloatArray, c1: FloatArray, i: int) -> float:
 
 @njit(cache=True)
 def relax_bounds(
-    bounds: FloatArray, exact: BoolArray, w: FloatArray, before: FloatArray, after: FloatArray
+    c: FloatArray,
+    w: FloatArray,
+    bounds: FloatArray,
+    exact: BoolArray,
+    before: FloatArray,
+    after: FloatArray,
 ) -> None:
     """Keep ``bounds`` lower bounds of the gains after the cheapest open costs went from
     ``before`` to ``after``.
 
-    A term ``w_j min(c_ij - c1_j, 0)`` grows where ``c1_j`` falls and falls by at most
-    ``w_j (after_j - before_j)`` where it rises, so every gain falls by at most
+    A term ``w_j min(c_ij - c1_j, 0)`` is ``0`` before and after where
+    ``c_ij >= max(before_j, after_j)``: a site with no other term among the atoms whose
+    ``c1_j`` changed keeps its gain (bit for bit, the same terms summed in the same
+    order) and its bound. Elsewhere a term grows where ``c1_j`` falls and falls by at
+    most ``w_j (after_j - before_j)`` where it rises, so the gain falls by at most
     ``rise = sum_j w_j max(after_j - before_j, 0)``; a relative ``1e-9`` more covers
     the rounding of the sums.
     """
+    n, m = c.shape
     rise = 0.0
-    for j in range(w.size):
+    touched = np.zeros(n, dtype=np.bool_)
+    for j in range(m):
+        if after[j] == before[j]:
+            continue
         if after[j] > before[j]:
             rise += w[j] * (after[j] - before[j])
-    for i in range(bounds.size):
-        if math.isfinite(bounds[i]):
-            bounds[i] -= rise + 1e-9 * (abs(bounds[i]) + rise)
-        exact[i] = False
+        top = max(after[j], before[j])
+        for i in range(n):
+            if c[i, j] < top:
+                touched[i] = True
+    for i in range(n):
+        if touched[i]:
+            exact[i] = False
+            if math.isfinite(bounds[i]):
+                bounds[i] -= rise + 1e-9 * (abs(bounds[i]) + rise)
