@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -39,9 +40,9 @@ from routing_svc.nets import resolve_network
 from routing_svc.network import RoadSpace, load_network
 from routing_svc.sa.consolidation import Consolidation, ConsolidationPolicy, consolidate
 from routing_svc.types import FloatArray, NetPosition
-from tests.sa.test_interchange import reference_fast_interchange, reference_greedy
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "nets"
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared" / "nets"
 NETWORKS = {"drt": "drt", "badhersfeld": str(SHARED / "badhersfeld.net.xml.gz")}
 
 
@@ -67,6 +68,10 @@ class TimedSpace:
 def numpy_baseline() -> Any:
     """A context in which consolidations solve with the numpy greedy addition and fast
     interchange."""
+    if str(REPO) not in sys.path:  # the baseline is the reference of the tests
+        sys.path.insert(0, str(REPO))
+    from tests.sa.test_interchange import reference_fast_interchange, reference_greedy
+
     return mock.patch.multiple(
         consolidation, greedy=reference_greedy, fast_interchange=reference_fast_interchange
     )
@@ -147,7 +152,12 @@ def main() -> None:
     parser.add_argument("--reservoir", type=int, default=ConsolidationPolicy().reservoir)
     parser.add_argument("--repeat", type=int, default=2)
     args = parser.parse_args()
-    fleets = [int(v) for v in args.vehicles.split(",")]
+    try:
+        fleets = [int(v) for v in args.vehicles.split(",")]
+    except ValueError:
+        parser.error(f"--vehicles takes comma-separated integers, got {args.vehicles!r}")
+    if args.repeat < 1 or args.reservoir < 2 or min(fleets) < 1:
+        parser.error("--repeat and every fleet size must be >= 1, --reservoir >= 2")
     # compile the kernels outside the timing
     warmup = TimedSpace(RoadSpace(load_network(resolve_network("drt"))))
     positions = [NetPosition(e, 0.0) for e in range(3)]
