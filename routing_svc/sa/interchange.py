@@ -120,7 +120,9 @@ def greedy(c: FloatArray, w: FloatArray, p: int) -> IntArray:
 
     Lazy (Minoux's accelerated greedy, :func:`routing_svc.sa.interchange_kernels.lazy_greedy`):
     only the sites whose bound could beat the best are priced again. Among sites of
-    equal ``F`` after opening, the lowest index opens.
+    equal ``F`` after opening, the lowest index opens. Sums run over the atoms in
+    ascending order, so where totals are equal in exact arithmetic but not once
+    rounded, that order's rounding decides.
 
     Returns
     -------
