@@ -364,9 +364,10 @@ def consolidate(
         )  # fmt: skip
     chosen = _best_fit(costs, weight, [current, anchored])
     ordered = _pair(current, chosen)
-    owner = costs[ordered].argmin(axis=0)
+    chosen_costs = costs[ordered]
+    owner = chosen_costs.argmin(axis=0)
     served = np.bincount(owner, weights=weight, minlength=p)
-    after = float(weight @ costs[ordered].min(axis=0)) / float(weight.sum())
+    after = float(weight @ chosen_costs[owner, np.arange(owner.size)]) / float(weight.sum())
     return Consolidation(
         True,
         tuple(sites[i] for i in ordered.tolist()),
