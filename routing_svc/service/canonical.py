@@ -118,7 +118,9 @@ class TargetResult(NamedTuple):
     ``target`` and ``new_position`` are described positions (``edge, offset, x, y``
     and ``lon, lat`` where the network has a projection); ``new_position`` may be
     the ``target`` object itself. ``backed_off`` lists ``(vehicle id, described
-    position)``.
+    position)``. ``dispatch`` is the dispatch answer (who goes now,
+    :meth:`routing_svc.sa.live.Sent.to_dict`); ``None`` only for results stored before
+    it existed, which replay writes again without it.
     """
 
     seq: int
@@ -135,10 +137,13 @@ class TargetResult(NamedTuple):
     new_position: dict[str, Any]
     backed_off: Sequence[tuple[str, dict[str, Any]]]
     consolidated: dict[str, Any] | None = None
+    dispatch: dict[str, Any] | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """The result as the API documents it (``version`` is ``seq``)."""
         extra = {} if self.consolidated is None else {"consolidated": self.consolidated}
+        if self.dispatch is not None:
+            extra["dispatch"] = self.dispatch
         return extra | {
             "seq": self.seq,
             "version": self.seq,
@@ -189,6 +194,7 @@ class TargetResult(NamedTuple):
                 ),
                 '],"cost":',
                 cost_text,
+                "" if self.dispatch is None else ',"dispatch":' + dumps(self.dispatch),
                 ',"moved":',
                 _string(self.moved),
                 ',"moved_by":',

@@ -4,7 +4,14 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StringConstraints, field_validator
+from pydantic import (
+    AwareDatetime,
+    BaseModel,
+    ConfigDict,
+    Field,
+    StringConstraints,
+    field_validator,
+)
 
 from routing_svc.sa import DEFAULT_RULE
 
@@ -158,6 +165,31 @@ class FleetSpec(Strict):
         | None
     ) = None
 
+    learning_vehicles: Annotated[
+        Literal["all", "available"],
+        Field(
+            description="Whose reference learns from a target: 'all' (the paper's eq. (10): "
+            "the closest reference moves, busy or not) or 'available' (the closest reference "
+            "among the available vehicles moves, as in the hypercube model).",
+        ),
+    ] = "all"
+    service_thresholds: Annotated[
+        list[Annotated[float, Field(allow_inf_nan=False, gt=0.0, le=1e9)]],
+        Field(
+            min_length=1,
+            max_length=16,
+            description="Service-level thresholds in cost units: the metrics report the "
+            "fraction of targets the dispatched vehicles complete within each.",
+        ),
+    ] = [300.0, 600.0, 900.0]
+
+    @field_validator("service_thresholds")
+    @classmethod
+    def _increasing(cls, thresholds: list[float]) -> list[float]:
+        if any(b <= a for a, b in zip(thresholds, thresholds[1:], strict=False)):
+            raise ValueError("service thresholds must be strictly increasing")
+        return thresholds
+
     def learning_rule(self) -> str:
         """The rule asked for: ``rule``; else the probe rule when a probe window or
         annealing is given (the paper's for a window of 0); else the default for
@@ -195,3 +227,85 @@ class TravelTimes(Strict):
         Annotated[str, StringConstraints(min_length=1, max_length=256)],
         Annotated[float, Field(allow_inf_nan=False, gt=0.0, le=1e7)],
     ]
+
+
+# -- vehicle state and dispatch ---------------------------------------------------
+
+VehicleStatus = Literal["available", "busy", "offline"]
+Timestamp = Annotated[float, Field(allow_inf_nan=False, ge=0.0, le=1e11)] | AwareDatetime
+
+
+class VehicleStateSpec(Strict):
+    """A vehicle's new live state (``PUT /v1/fleets/{id}/vehicles/{vid}/state``)."""
+
+    status: VehicleStatus
+    position: Position | None = Field(
+        None,
+        description="Where the vehicle is now; left out: where it was; null: at its reference.",
+    )
+    timestamp: Timestamp | None = Field(
+        None,
+        description="When the state was observed (seconds since the epoch or ISO 8601 with "
+        "a zone); may not go back before the vehicle's last timestamp.",
+    )
+
+
+class VehicleStateChange(VehicleStateSpec):
+    """One vehicle's new state in a batch."""
+
+    vehicle: Identifier
+
+
+class VehicleStateBatch(Strict):
+    """Many vehicles' new states, applied together or not at all."""
+
+    changes: Annotated[list[VehicleStateChange], Field(min_length=1, max_length=10_000)]
+
+
+class DescribedPosition(BaseModel):
+    """A position as the API shows it (``lon``/``lat`` where the network has a projection)."""
+
+    edge: str
+    offset: float
+    x: float
+    y: float
+    lon: float | None = None
+    lat: float | None = None
+
+
+class VehicleView(BaseModel):
+    """A vehicle: its reference (what learning moves) and its live state."""
+
+    id: str
+    type: str
+    speed: float
+    position: DescribedPosition = Field(description="The reference (kept for older clients).")
+    reference: DescribedPosition
+    status: VehicleStatus
+    current: DescribedPosition = Field(description="Where the vehicle is now.")
+    at_reference: bool = Field(description="Whether ``current`` follows the reference.")
+    timestamp: float | None
+    updates: int
+
+
+class VehicleStateResult(BaseModel):
+    """The ``vehicle_state`` event's result: the changed vehicles as they are now."""
+
+    seq: int
+    version: int
+    vehicles: list[VehicleView]
+
+
+class SentVehicle(BaseModel):
+    vehicle: str
+    type: str = Field(description="The required type it fills ('*': any one vehicle).")
+    cost: float = Field(description="Its travel time D / v from its current position.")
+
+
+class DispatchAnswer(BaseModel):
+    """Who goes now: per required type the closest available vehicles by current position."""
+
+    status: Literal["dispatched", "partial", "queued"]
+    vehicles: list[SentVehicle]
+    missing: list[str] = Field(description="One entry per required vehicle nobody fills.")
+    cost: float | None = Field(description="Completion cost: the last one's arrival.")
