@@ -24,7 +24,15 @@ from routing_svc.service.fleets import FleetService
 from routing_svc.service.guards import Guards
 from routing_svc.service.networks import NetworkEntry, NetworkRegistry
 from routing_svc.service.problems import install_problem_handlers
-from routing_svc.service.routes import dashboard, fleets, health, networks, stream, targets
+from routing_svc.service.routes import (
+    dashboard,
+    fleets,
+    health,
+    networks,
+    stream,
+    targets,
+    vehicles,
+)
 from routing_svc.service.settings import Settings
 from routing_svc.service.store_health import StoreHealth
 from routing_svc.store import EventLog, NetworkRecord
@@ -187,6 +195,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         health.router,
         networks.router,
         fleets.router,
+        vehicles.router,
         stream.router,
         dashboard.router,
     ):

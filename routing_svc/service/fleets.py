@@ -63,8 +63,8 @@ from routing_svc.service.committer import Committer
 from routing_svc.service.creation import build_created_payload
 from routing_svc.service.networks import NetworkEntry, NetworkRegistry
 from routing_svc.service.runtime import FleetRuntime, same_snapshot
-from routing_svc.service.vehicle_states import resolve_changes
 from routing_svc.service.schemas import FleetSpec, TargetSpec, VehicleStateChange
+from routing_svc.service.vehicle_states import resolve_changes
 from routing_svc.store import EventLog, EventRecord, FleetGroup, GroupItem, NewEvent
 from routing_svc.types import NetPosition
 

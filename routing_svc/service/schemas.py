@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from itertools import pairwise
 from typing import Annotated, Any, Literal
 
 from pydantic import (
@@ -186,7 +187,7 @@ class FleetSpec(Strict):
     @field_validator("service_thresholds")
     @classmethod
     def _increasing(cls, thresholds: list[float]) -> list[float]:
-        if any(b <= a for a, b in zip(thresholds, thresholds[1:], strict=False)):
+        if any(b <= a for a, b in pairwise(thresholds)):
             raise ValueError("service thresholds must be strictly increasing")
         return thresholds
 

@@ -46,5 +46,7 @@ def resolve_changes(
         else:
             where = runtime.fleet.vehicle_state(vid).position
         current[vid] = where
-        out.append((vid, VehicleState(Status(change.status), where, epoch_seconds(change.timestamp))))
+        out.append(
+            (vid, VehicleState(Status(change.status), where, epoch_seconds(change.timestamp)))
+        )
     return out
