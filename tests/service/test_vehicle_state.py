@@ -7,13 +7,16 @@ early-exit search that serves the targets.
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any
 
 import numpy as np
+import sqlalchemy as sa
 from fastapi.testclient import TestClient
 
 from routing_svc.network import RoadSpace, load_network
+from routing_svc.store.schema import events, fleets
 from routing_svc.types import NetPosition
 from tests.service.conftest import DRT
 
@@ -245,3 +248,58 @@ def test_service_levels_follow_the_dispatched_costs(client: TestClient) -> None:
         assert value <= levels["all"]["percentiles"][f"p{p}"] <= value * 1.01
     bad = client.post("/v1/fleets", json=fleet_body("bad", service_thresholds=[600, 300]))
     assert bad.status_code == 422
+
+
+def test_replay_after_restart_gives_the_same_state(db_url: str, make_client: Any) -> None:
+    first = make_client(db_url)
+    first.post("/v1/fleets", json=fleet_body()).raise_for_status()
+    rng = np.random.default_rng(11)
+    for k, target in enumerate(random_targets(rng, 70)):  # past a snapshot (every 64)
+        if k % 10 == 0:
+            vid = f"v{k % len(EDGES)}"
+            status = ("busy", "available", "offline")[k % 3]
+            where = random_targets(rng, 1)[0]
+            body = {"status": status, "position": where, "timestamp": float(k)}
+            put_state(first, vid, body).raise_for_status()
+        first.post("/v1/fleets/f1/targets", json={"position": target}).raise_for_status()
+    fleet, metrics = first.get("/v1/fleets/f1").json(), first.get("/v1/fleets/f1/metrics").json()
+    first.__exit__(None, None, None)
+    again = make_client(db_url)
+    assert again.get("/v1/fleets/f1").json() == fleet
+    assert again.get("/v1/fleets/f1/metrics").json() == metrics
+    checked = again.app.state.fleets.verify("f1")
+    assert checked["snapshot_identical"] is True and checked["version"] == fleet["version"]
+
+
+def test_a_log_written_before_vehicle_states_replays_to_the_same_bytes(
+    db_url: str, make_client: Any
+) -> None:
+    """A database from before this change: target results without ``dispatch``, a
+    snapshot without service levels. It replays exactly, and the service levels are
+    derived from its log."""
+    first = make_client(db_url)
+    first.post("/v1/fleets", json=fleet_body()).raise_for_status()
+    rng = np.random.default_rng(12)
+    for target in random_targets(rng, 70):
+        first.post("/v1/fleets/f1/targets", json={"position": target}).raise_for_status()
+    metrics = first.get("/v1/fleets/f1/metrics").json()
+    first.__exit__(None, None, None)
+    engine = sa.create_engine(db_url)
+    with engine.begin() as conn:
+        rows = conn.execute(sa.select(events.c.seq, events.c.result)).all()
+        for seq, result in rows:
+            data = json.loads(result or "{}")
+            if data.pop("dispatch", None) is not None:
+                old = json.dumps(data, separators=(",", ":"), sort_keys=True)
+                conn.execute(events.update().where(events.c.seq == seq).values(result=old))
+        (state,) = conn.execute(sa.select(fleets.c.state)).one()
+        snapshot = json.loads(state)
+        del snapshot["service_levels"]
+        old = json.dumps(snapshot, separators=(",", ":"), sort_keys=True)
+        conn.execute(fleets.update().values(state=old))
+    engine.dispose()
+    again = make_client(db_url)
+    assert again.app.state.fleets.verify("f1")["snapshot_identical"] is True
+    assert again.get("/v1/fleets/f1/metrics").json() == metrics
+    target = {"position": random_targets(rng, 1)[0]}
+    assert "dispatch" in again.post("/v1/fleets/f1/targets", json=target).json()
