@@ -17,6 +17,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 from routing_svc import __version__
 from routing_svc.errors import Conflict, StorageError
 from routing_svc.network.identity import file_bytes_sha256
+from routing_svc.service import fleet_gauges
 from routing_svc.service.deadline import RequestDeadline
 from routing_svc.service.demo import ensure_demo_fleet, feed_demo_targets
 from routing_svc.service.fastpath import TARGET_PATH, TargetFastPath
@@ -154,6 +155,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             for entry in registry.all():
                 await asyncio.to_thread(entry.warm_up)
             service = FleetService(log, registry, recent_window=settings.recent_window)
+            fleet_gauges.COLLECTOR.track(service)
             app.state.settings = settings
             app.state.networks = registry
             app.state.fleets = service

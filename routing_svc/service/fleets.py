@@ -662,6 +662,16 @@ class FleetService:
         with self._locked(fleet_id):
             return self._runtime(fleet_id).metrics()
 
+    def cached_service_levels(self) -> list[tuple[str, dict[str, Any]]]:
+        """``(fleet id, service levels)`` of every fleet in memory (no database read)."""
+        out = []
+        for fleet_id in sorted(self._cache):
+            with self._locked(fleet_id):
+                runtime = self._cache.get(fleet_id)
+                if runtime is not None and not runtime.deleted:
+                    out.append((fleet_id, runtime.levels.report()))
+        return out
+
     def events(self, fleet_id: str, *, after: int, limit: int) -> list[dict[str, Any]]:
         return [
             {

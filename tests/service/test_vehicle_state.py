@@ -303,3 +303,20 @@ def test_a_log_written_before_vehicle_states_replays_to_the_same_bytes(
     assert again.get("/v1/fleets/f1/metrics").json() == metrics
     target = {"position": random_targets(rng, 1)[0]}
     assert "dispatch" in again.post("/v1/fleets/f1/targets", json=target).json()
+
+
+def test_prometheus_shows_the_service_levels(client: TestClient) -> None:
+    client.post("/v1/fleets", json=fleet_body("prom", service_thresholds=[50.0, 5000.0]))
+    rng = np.random.default_rng(8)
+    for target in random_targets(rng, 5):
+        client.post("/v1/fleets/prom/targets", json={"position": target}).raise_for_status()
+    levels = client.get("/v1/fleets/prom/metrics").json()["service_levels"]
+    text = client.get("/metrics").text
+    for limit, fraction in zip([50.0, 5000.0], levels["all"]["within"], strict=True):
+        line = f'routing_svc_fleet_within_threshold{{fleet="prom",scope="all",threshold="{limit}"}}'
+        assert f"{line} {fraction}" in text
+    p90 = levels["recent"]["percentiles"]["p90"]
+    assert (
+        f'routing_svc_fleet_completion_cost{{fleet="prom",quantile="0.9",scope="recent"}} {p90}'
+        in text
+    )
