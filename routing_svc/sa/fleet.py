@@ -13,6 +13,15 @@ served when the last of them arrives, and only that vehicle moves,
 ``step_amount`` (eqs. (9)-(10), see :mod:`routing_svc.sa.objectives`) along its
 shortest path toward ``z``.
 
+Vehicles also have a live state (:mod:`routing_svc.sa.live`): available or
+not, and where they are now. The same search answers who goes now
+(:attr:`Dispatch.sent`: the closest *available* vehicles by *current*
+position) apart from whose *reference* moves; :class:`LearningVehicles`
+chooses whether the mover is the closest reference of all vehicles (the
+paper's) or of the available ones. Under ``consolidating`` the held step acts
+on that mover's reference and consolidations on all references, as before
+(references are where vehicles wait when idle, busy or not).
+
 Three rules (:class:`Rule`): the paper's step alone; the paper's step with the
 backward probe; and ``consolidating``, the paper's step held at junctions
 (:mod:`routing_svc.sa.held_step`) with periodic consolidations
@@ -449,7 +458,8 @@ class Fleet(Generic[P]):
         self.state.vehicle_states = states
 
     def assign(self, target: P, requires: Sequence[str] | None = None) -> Dispatch[P]:
-        """Who would serve ``target``; changes nothing."""
+        """Who would go now (:attr:`Dispatch.sent`) and whose reference would move;
+        changes nothing."""
         return self._search(target, requires)[0]
 
     def observe(self, target: P, requires: Sequence[str] | None = None) -> Outcome[P]:
