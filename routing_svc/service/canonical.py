@@ -112,6 +112,28 @@ def _position(described: dict[str, Any]) -> str:
     raise _Untemplated
 
 
+def _dispatch(dispatch: dict[str, Any], cost: float, cost_text: str) -> str:
+    """``{"cost", "missing", "status", "vehicles": [{"cost", "type", "vehicle"}]}`` (the
+    dispatch answer, :meth:`routing_svc.sa.live.Sent.to_dict`), keys sorted; a cost equal
+    to the learning answer's ``cost`` is written from ``cost_text``."""
+    if len(dispatch) != 4:
+        raise _Untemplated
+    total = dispatch["cost"]
+    vehicles = []
+    for sent in dispatch["vehicles"]:
+        if len(sent) != 3:
+            raise _Untemplated
+        vehicles.append(
+            f'{{"cost":{_same_as(sent["cost"], cost, cost_text)},'
+            f'"type":{_string(sent["type"])},"vehicle":{_string(sent["vehicle"])}}}'
+        )
+    return (
+        f'{{"cost":{"null" if total is None else _same_as(total, cost, cost_text)},'
+        f'"missing":[{",".join(map(_string, dispatch["missing"]))}],'
+        f'"status":{_string(dispatch["status"])},"vehicles":[{",".join(vehicles)}]}}'
+    )
+
+
 class TargetResult(NamedTuple):
     """The result of a target event: what the client gets and the event log keeps.
 
@@ -179,6 +201,7 @@ class TargetResult(NamedTuple):
             raise _Untemplated
         cost = self.cost
         cost_text = _number(cost)
+        dispatch_text = "" if self.dispatch is None else _dispatch(self.dispatch, cost, cost_text)
         seq_text = _number(self.seq)
         target_text = _position(self.target)
         new_position = self.new_position
@@ -194,7 +217,7 @@ class TargetResult(NamedTuple):
                 ),
                 '],"cost":',
                 cost_text,
-                "" if self.dispatch is None else ',"dispatch":' + dumps(self.dispatch),
+                "" if self.dispatch is None else ',"dispatch":' + dispatch_text,
                 ',"moved":',
                 _string(self.moved),
                 ',"moved_by":',

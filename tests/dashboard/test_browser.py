@@ -110,9 +110,7 @@ def test_vehicles_appear_where_the_api_says(
     colours = {mark["type"]: mark["stroke"] for mark in shown.values()}
     assert all(mark["stroke"] == colours[mark["type"]] for mark in shown.values())
     assert len(set(colours.values())) == 3
-    assert {(mark["status"], mark["fill"]) for mark in shown.values()} == {
-        ("available", AVAILABLE)
-    }
+    assert {(mark["status"], mark["fill"]) for mark in shown.values()} == {("available", AVAILABLE)}
     assert dash.problems() == CLEAN
 
 
