@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Literal
 
 from routing_svc.errors import InvalidNetwork, UnknownNetwork
+from routing_svc.network.sumo_tools import sumo_home, sumo_tool
 from routing_svc.paths import cache_root
 
 __all__ = [
@@ -42,7 +43,6 @@ __all__ = [
     "list_networks",
     "resolve_network",
     "run",
-    "sumo_home",
 ]
 
 Source = Literal["generated", "eclipse-sumo"]
@@ -163,37 +163,15 @@ GENERATED: dict[str, Recipe] = {
 """The recipes of the generated networks, by name."""
 
 
-def sumo_home() -> Path | None:
-    """The installed SUMO's home: the eclipse-sumo package, else ``$SUMO_HOME``."""
-    try:
-        import sumo
-    except ImportError:
-        env = os.environ.get("SUMO_HOME")
-        return Path(env) if env else None
-    return Path(sumo.SUMO_HOME)
-
-
 def cache_dir() -> Path:
     """Where generated networks go: ``$ROUTING_SVC_CACHE/nets`` or ``~/.cache/routing_svc/nets``."""
     return cache_root() / "nets"
 
 
-def _binary(name: str) -> str:
-    home = sumo_home()
-    if home is not None and (home / "bin" / name).is_file():
-        return str(home / "bin" / name)
-    import sumolib
-
-    return str(sumolib.checkBinary(name))
-
-
 def _run_tool(tool: str, args: list[str], *, output: Path) -> None:
     """Run a SUMO tool in ``output``'s folder, writing ``output`` (relative name)."""
-    env = dict(os.environ)
-    home = sumo_home()
-    if home is not None:
-        env["SUMO_HOME"] = str(home)
-    command = [_binary(tool), *args, "--output-file", output.name]
+    binary, env = sumo_tool(tool)
+    command = [binary, *args, "--output-file", output.name]
     done = subprocess.run(command, cwd=output.parent, env=env, capture_output=True, text=True)
     if done.returncode != 0 or not output.is_file():
         raise InvalidNetwork(f"{tool} failed ({done.returncode}): {done.stderr.strip()[-2000:]}")

@@ -15,7 +15,6 @@ import math
 import sys
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -50,7 +49,7 @@ def network_scenario(
     net: str, *, demand: str, vehicles: int, cost: str, rng: np.random.Generator
 ) -> Scenario:
     """A road-network scenario (``net`` is a known name or a path)."""
-    from routing_svc.demand import network as network_demand
+    from routing_svc.demand.spec import network_demand, parse_demand_spec
     from routing_svc.nets import resolve_network
     from routing_svc.network import RoadSpace, load_network
     from routing_svc.optimum import candidate_sites
@@ -58,18 +57,7 @@ def network_scenario(
 
     network = load_network(resolve_network(net))
     space = RoadSpace(network, cost=cost)  # type: ignore[arg-type]
-    kind, _, arg = demand.partition(":")
-    if kind == "uniform":
-        dist = network_demand.uniform_by_length(network)
-    elif kind == "hotspots":
-        count = int(arg) if arg else 3
-        dist = network_demand.hotspot_mixture(network, centres=count, rng=rng)
-    elif Path(demand).is_file():
-        dist = network_demand.from_weights_file(network, Path(demand))
-    else:
-        raise InvalidInput(
-            f"--demand must be 'uniform', 'hotspots[:K]' or a weights file, got {demand!r}"
-        )
+    dist = network_demand(network, parse_demand_spec(demand), rng=rng)
     edges = rng.choice(network.n_edges, size=vehicles, replace=vehicles > network.n_edges)
     starts = [NetPosition(int(e), 0.0) for e in edges]
     sites = candidate_sites(network, dist, max_sites=1500)
@@ -84,16 +72,16 @@ def network_scenario(
 def plane_scenario(*, demand: str, vehicles: int, rng: np.random.Generator) -> Scenario:
     """The unit-free plane ``[0, 10]^2`` of the paper."""
     from routing_svc.demand import gaussian_mixture, uniform_rectangle
+    from routing_svc.demand.spec import Hotspots, Uniform, parse_demand_spec
     from routing_svc.sa import EuclideanPlane
     from routing_svc.types import PlanePosition
 
     bounds = (0.0, 0.0, 10.0, 10.0)
-    kind, _, arg = demand.partition(":")
-    if kind == "uniform":
+    form = parse_demand_spec(demand).form
+    if isinstance(form, Uniform):
         dist = uniform_rectangle(bounds, cells=30)
-    elif kind == "hotspots":
-        count = int(arg) if arg else 3
-        centres = [tuple(c) for c in rng.uniform(1.5, 8.5, size=(count, 2))]
+    elif isinstance(form, Hotspots):
+        centres = [tuple(c) for c in rng.uniform(1.5, 8.5, size=(form.count, 2))]
         dist = gaussian_mixture(bounds, centres=centres, spread=1.0, cells=30)
     else:
         raise InvalidInput("on the plane --demand must be 'uniform' or 'hotspots[:K]'")
@@ -263,7 +251,12 @@ def add_parser(sub: Any) -> None:
         default=20000,
         help="targets in the stream, those used to start included (default: 20000)",
     )
-    p.add_argument("--demand", default="hotspots:3", help="uniform | hotspots[:K] | weights file")
+    p.add_argument(
+        "--demand",
+        default="hotspots:3",
+        help="uniform | hotspots[:K] | weights:FILE | buildings:FILE (the plane: uniform or "
+        "hotspots[:K]); see routing_svc.demand.spec",
+    )
     p.add_argument(
         "--cost",
         choices=["length", "time"],

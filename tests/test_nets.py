@@ -19,8 +19,8 @@ from routing_svc.nets import (
     list_networks,
     resolve_network,
     run,
-    sumo_home,
 )
+from routing_svc.network.sumo_tools import sumo_home
 
 
 @pytest.fixture(scope="module")

@@ -2,25 +2,28 @@
 
 Every constructor cuts each edge into ``k = ceil(length / spacing)`` equal
 pieces and puts one atom at the middle of each piece; the atom carries the
-demand of its piece. With the default spacing of 20 m the DRT district that
-ships with SUMO (``tools/game/DRT/osm.net.xml``, about 37 km of car roads)
-gets about 2,300 atoms.
+demand of its piece (default spacing 20 m).
 
 - :func:`uniform_by_length`: demand per metre of road is constant, so an
   atom's mass is its piece length.
 - :func:`hotspot_mixture`: demand per metre follows an isotropic Gaussian
   mixture of the atom's coordinates (mass = piece length x density).
-- :func:`from_weights_file`: a weight per edge, spread uniformly along it.
+- :func:`from_weights_file`: a weight per edge, spread uniformly along it
+  (:func:`from_edge_weights` for weights already in memory).
+- :func:`from_buildings_file`: a weight per building on its nearest road,
+  summed per edge and spread the same way.
 """
 
 from __future__ import annotations
 
+import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
+from routing_svc.demand.buildings import read_building_weights
 from routing_svc.demand.distribution import DemandDistribution
 from routing_svc.demand.plane import mixture_density
 from routing_svc.demand.weights_file import read_edge_weights
@@ -28,6 +31,8 @@ from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork
 from routing_svc.network.snapping import point_on_edge
 from routing_svc.types import FloatArray, IntArray, NetPosition
+
+_LOG = logging.getLogger("routing_svc.demand")
 
 #: Default largest piece of road represented by one atom, in metres.
 DEFAULT_SPACING = 20.0
@@ -147,13 +152,65 @@ def from_weights_file(
         Any problem with the file, naming the line or key.
     """
     edge_weights = read_edge_weights(path, known_edges=network.edge_index)
+    return from_edge_weights(
+        network, edge_weights, name=f"weights_file:{Path(path).name}", spacing=spacing
+    )
+
+
+def from_buildings_file(
+    network: CompiledNetwork, path: str | Path, *, spacing: float = DEFAULT_SPACING
+) -> DemandDistribution[NetPosition]:
+    """Demand from a buildings CSV: each building's ``Weight`` on its ``GenEdge``.
+
+    The weights of an edge's buildings add up and are spread uniformly along
+    the edge (:func:`from_edge_weights`). Buildings on edges outside the
+    network are dropped and reported with a warning on the
+    ``routing_svc.demand`` logger (see :mod:`routing_svc.demand.buildings`).
+
+    Raises
+    ------
+    InvalidInput
+        Any problem with the file, or no building left on the network.
+    """
+    found = read_building_weights(path, known_edges=network.edge_index)
+    if found.dropped_buildings:
+        _LOG.warning(
+            "%s: %d of %d buildings (%.1f %% of the weight) are on %d edges outside the "
+            "network's car component and were dropped",
+            Path(path).name,
+            found.dropped_buildings,
+            found.buildings,
+            100.0 * found.dropped_weight,
+            len(found.dropped_edges),
+        )
+    return from_edge_weights(
+        network, found.edge_weights, name=f"buildings:{Path(path).name}", spacing=spacing
+    )
+
+
+def from_edge_weights(
+    network: CompiledNetwork,
+    edge_weights: Mapping[int, float],
+    *,
+    name: str,
+    spacing: float = DEFAULT_SPACING,
+) -> DemandDistribution[NetPosition]:
+    """Demand with weight ``W_e`` per edge index, spread uniformly along each edge.
+
+    Raises
+    ------
+    InvalidInput
+        No edge of positive weight, or weights that are not finite and ``>= 0``.
+    """
     per_metre = np.zeros(network.n_edges)
     for edge, weight in edge_weights.items():
-        per_metre[edge] = weight / float(network.length[edge])
+        per_metre[edge] = float(weight) / float(network.length[edge])
     carrying = np.flatnonzero(per_metre > 0.0)
+    if carrying.size == 0:
+        raise InvalidInput(f"demand {name!r} gives no edge a positive weight")
     edges, offsets, pieces = edge_pieces(network, spacing=spacing, edges=carrying)
     return DemandDistribution.from_masses(
-        f"weights_file:{Path(path).name}", _positions(edges, offsets), pieces * per_metre[edges]
+        name, _positions(edges, offsets), pieces * per_metre[edges]
     )
 
 

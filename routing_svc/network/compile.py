@@ -138,7 +138,7 @@ class CompiledNetwork:
     @cached_property
     def length_values(self) -> list[float]:
         """``length`` as a list of Python floats, for per-position checks in Python code
-        (indexing a list is several times cheaper than indexing an array)."""
+        (indexing a list is cheaper than indexing an array)."""
         return [float(v) for v in self.length.tolist()]
 
     @property

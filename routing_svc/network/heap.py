@@ -7,7 +7,7 @@ number of nodes.
 
 Each entry has four children (``4 i + 1 .. 4 i + 4``): the heap is half as
 deep as a binary one, and the four keys compared on the way down share a
-cache line, which makes the search's pops about 10 % cheaper on a large grid.
+cache line, which makes the search's pops cheaper on a large grid.
 """
 
 from __future__ import annotations

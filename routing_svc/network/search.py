@@ -46,9 +46,7 @@ classes scattered over megabytes of arrays), not by arithmetic. So every
 arc is one 16-byte record of its edge's cost, the class it leads to and the
 edge (:func:`search_arcs`: the arcs of a class share a cache line), the heap
 is 4-ary (:mod:`routing_svc.network.heap`), and when a class goes on the
-heap the cache lines that settling it will read are prefetched. On the
-160 x 160 grid this made a query with 50 vehicles about 1.5 times faster
-than reading costs, classes and edges from three arrays.
+heap the cache lines that settling it will read are prefetched.
 
 The mover's path
 ----------------

@@ -2,7 +2,7 @@
 
 ::
 
-    routing-svc optimum --net PATH --vehicles P [--demand uniform|hotspots[:K]|FILE]
+    routing-svc optimum --net PATH --vehicles P [--demand SPEC]
         [--cost length|time] [--seed S] [--method auto|milp|heuristic]
         [--max-sites N] [--time-limit SECONDS]
 
@@ -24,8 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from routing_svc.demand import DemandDistribution, hotspot_mixture, uniform_by_length
-from routing_svc.demand.network import from_weights_file
+from routing_svc.demand.spec import network_demand, parse_demand_spec
 from routing_svc.errors import InvalidInput
 from routing_svc.nets import resolve_network
 from routing_svc.network import CompiledNetwork, RoadSpace, load_network
@@ -34,9 +33,6 @@ from routing_svc.optimum.candidates import candidate_sites, distinct_rows
 from routing_svc.optimum.evaluate import expected_cost
 from routing_svc.optimum.pmedian import Method, solve_pmedian
 from routing_svc.types import NetPosition
-
-#: Hotspots drawn by ``--demand hotspots`` without a count.
-DEFAULT_HOTSPOTS = 3
 
 _UNITS = {"length": "m", "time": "s"}
 _COSTS: dict[str, CostKind] = {"length": "length", "time": "time"}
@@ -57,8 +53,9 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         "--demand",
         default="uniform",
         metavar="SPEC",
-        help="'uniform' (by road length), 'hotspots[:K]' (K Gaussian hotspots, default 3) "
-        "or a CSV/JSON file of edge_id -> weight",
+        help="'uniform' (by road length), 'hotspots[:K]' (K Gaussian hotspots, default 3), "
+        "'weights:FILE' (a CSV/JSON file of edge_id -> weight; a bare FILE too) or "
+        "'buildings:FILE' (a buildings CSV with Weight and GenEdge columns)",
     )
     parser.add_argument("--cost", choices=tuple(_UNITS), default="length")
     parser.add_argument("--seed", type=int, default=0, help="seed for the hotspot centres")
@@ -108,7 +105,7 @@ def optimum_report(
     vehicles : int
         ``p``, the number of vehicles (``>= 1``).
     demand : str
-        ``"uniform"``, ``"hotspots"``, ``"hotspots:K"`` or a weights file.
+        A demand spec (:func:`routing_svc.demand.spec.parse_demand_spec`).
     cost : {"length", "time"}
         Edge cost: metres or free-flow seconds.
     seed : int
@@ -141,7 +138,8 @@ def optimum_report(
         raise InvalidInput(f"--method must be 'auto', 'milp' or 'heuristic', got {method!r}")
     path = resolve_network(net)
     network = load_network(path)
-    distribution = demand_from_spec(network, demand, rng=np.random.default_rng(seed))
+    recipe = parse_demand_spec(demand)
+    distribution = network_demand(network, recipe, rng=np.random.default_rng(seed))
     space = RoadSpace(network, cost=_COSTS[cost])
     candidates = candidate_sites(network, distribution, max_sites=max_sites)
     matrix = space.cost_matrix(candidates, list(distribution.positions))
@@ -177,32 +175,6 @@ def optimum_report(
         "n_demand": len(distribution),
         "seed": seed,
     }
-
-
-def demand_from_spec(
-    network: CompiledNetwork, spec: str, *, rng: np.random.Generator
-) -> DemandDistribution[NetPosition]:
-    """``"uniform"``, ``"hotspots[:K]"`` or a weights file, as a distribution.
-
-    Raises
-    ------
-    InvalidInput
-        An unknown spec, a bad hotspot count, or a bad weights file.
-    """
-    kind, colon, count = spec.partition(":")
-    if spec == "uniform":
-        return uniform_by_length(network)
-    if kind == "hotspots":
-        if not colon:
-            return hotspot_mixture(network, centres=DEFAULT_HOTSPOTS, rng=rng)
-        if not count.isdigit() or int(count) < 1:
-            raise InvalidInput(f"--demand hotspots:K needs an integer K >= 1, got {count!r}")
-        return hotspot_mixture(network, centres=int(count), rng=rng)
-    if Path(spec).is_file():
-        return from_weights_file(network, spec)
-    raise InvalidInput(
-        f"--demand must be 'uniform', 'hotspots[:K]' or an existing weights file, got {spec!r}"
-    )
 
 
 def _describe(space: RoadSpace, network: CompiledNetwork, position: NetPosition) -> dict[str, Any]:

@@ -83,8 +83,17 @@ class ConsolidationPolicy:
     block : int
         Targets per block of the shift test.
     shift_ratio : float
-        A block whose mean cost exceeds this times :attr:`Consolidation.baseline` of
-        the last consolidation starts a new epoch.
+        A block whose mean cost exceeds this times the baseline of the last
+        consolidation starts a new epoch.
+    refit : float or None
+        References that a consolidation fitted to ``m`` targets of the epoch give way to
+        the fit of a reservoir of at least ``refit * m`` targets unless the
+        cross-validated test finds it worse by more than one standard error (more
+        targets of the same demand make a better estimate of its p-median); ``None``:
+        only the test decides.
+    fresh_baseline : bool
+        The shift test's baseline is :attr:`Consolidation.fresh_baseline` (the cost of
+        targets the references were not fitted to), else :attr:`Consolidation.baseline`.
     """
 
     reservoir: int = 4000
@@ -95,6 +104,8 @@ class ConsolidationPolicy:
     confidence: float = 0.0
     block: int = 250
     shift_ratio: float = 1.25
+    refit: float | None = 1.5
+    fresh_baseline: bool = True
 
     def __post_init__(self) -> None:
         for name in ("reservoir", "first", "longest", "block", "folds"):
@@ -109,6 +120,15 @@ class ConsolidationPolicy:
             raise InvalidInput("consolidation confidence must be a finite number >= 0")
         if not (math.isfinite(self.shift_ratio) and self.shift_ratio > 1.0):
             raise InvalidInput("consolidation shift_ratio must be a finite number > 1")
+        if self.refit is not None and not (
+            isinstance(self.refit, float | int)
+            and not isinstance(self.refit, bool)
+            and math.isfinite(self.refit)
+            and self.refit > 1.0
+        ):
+            raise InvalidInput("consolidation refit must be a finite number > 1, or null")
+        if not isinstance(self.fresh_baseline, bool):
+            raise InvalidInput("consolidation fresh_baseline must be true or false")
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -120,16 +140,21 @@ class ConsolidationPolicy:
             "confidence": self.confidence,
             "block": self.block,
             "shift_ratio": self.shift_ratio,
+            # a policy of the behaviour before these two stores the bytes it had then
+            **({} if self.refit is None else {"refit": self.refit}),
+            **({"fresh_baseline": True} if self.fresh_baseline else {}),
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> ConsolidationPolicy:
+        """A stored policy; one stored without ``refit`` or ``fresh_baseline`` keeps the
+        behaviour it was stored with (no refit, the reservoir's baseline)."""
         if not isinstance(data, dict):
             raise InvalidInput("consolidation must be an object")
-        unknown = set(data) - set(cls().to_dict())
+        unknown = set(data) - {*cls().to_dict(), "refit", "fresh_baseline"}
         if unknown:
             raise InvalidInput(f"unknown consolidation fields: {sorted(unknown)}")
-        return cls(**data)
+        return cls(**{"refit": None, "fresh_baseline": False, **data})
 
     def next_after(self, *, now: int, epoch: int) -> int:
         """The target count of the next consolidation after one at ``now``."""
@@ -157,6 +182,9 @@ class Consolidation(Generic[P]):
     gain, standard_error : float
         The cross-validated change of the mean cost that solving again brings
         (negative: better), and its standard error.
+    fresh_before : float or None
+        Mean cost from the references before of the targets that tested them (those
+        they were not fitted to); ``None`` when none did, or in a record that predates it.
     """
 
     accepted: bool
@@ -167,9 +195,10 @@ class Consolidation(Generic[P]):
     sample_after: float
     gain: float
     standard_error: float
+    fresh_before: float | None = None
 
     def to_dict(self, encode: Callable[[P], dict[str, object]]) -> dict[str, Any]:
-        return {
+        data: dict[str, Any] = {
             "accepted": self.accepted,
             "positions": [encode(p) for p in self.positions],
             "updates": list(self.updates),
@@ -179,6 +208,18 @@ class Consolidation(Generic[P]):
             "gain": self.gain,
             "standard_error": self.standard_error,
         }
+        if self.fresh_before is not None:
+            data["fresh_before"] = self.fresh_before
+        return data
+
+    @property
+    def fresh_baseline(self) -> float:
+        """The mean cost to expect from the references afterwards, measured only on
+        targets they were not fitted to: the tested targets' cost before plus the
+        cross-validated gain when accepted; :attr:`baseline` when nothing was tested."""
+        if self.fresh_before is None:
+            return self.baseline
+        return self.fresh_before + self.gain if self.accepted else self.fresh_before
 
     @property
     def baseline(self) -> float:
@@ -201,6 +242,9 @@ class Consolidation(Generic[P]):
                 sample_after=float(data["sample_after"]),
                 gain=float(data["gain"]),
                 standard_error=float(data["standard_error"]),
+                fresh_before=None
+                if data.get("fresh_before") is None
+                else float(data["fresh_before"]),
             )
         except (KeyError, TypeError, ValueError):
             raise InvalidInput("a recorded consolidation is malformed") from None
@@ -231,6 +275,7 @@ def consolidate(
     updates: Sequence[int],
     fresh: int,
     folds: int = 2,
+    refit: bool = False,
 ) -> Consolidation[P]:
     """Solve the reservoir without each fold, test on that fold, solve all if it pays.
 
@@ -257,6 +302,10 @@ def consolidate(
         were accepted: only they test.
     folds : int
         Folds of the cross-validation (at least 2).
+    refit : bool
+        The references were fitted to a reservoir this one outgrows
+        (:attr:`ConsolidationPolicy.refit`): solving all is taken unless the test finds
+        it worse by more than one standard error.
     """
     p = len(positions)
     if len(reservoir) < 2 or len(anchor) != p or len(updates) != p:
@@ -286,7 +335,7 @@ def consolidate(
     current = _distinct(actual, len(sites))
     anchored = _distinct(np.array([row[x] for x in anchor], dtype=np.int64), len(sites))
     now = costs[actual].min(axis=0)
-    differences, weights = [], []
+    differences, weights, tested_now = [], [], []
     for part, test in zip(parts, tests, strict=True):
         tested = test > 0
         if not tested.any():
@@ -294,6 +343,7 @@ def consolidate(
         challenger = _best_fit(costs, weight - part, [current, anchored])
         differences.append((costs[challenger].min(axis=0) - now)[tested])
         weights.append(test[tested])
+        tested_now.append(now[tested])
     if not differences:
         before = float(weight @ now) / float(weight.sum())
         return Consolidation(
@@ -305,10 +355,12 @@ def consolidate(
     spread = float(tested_weight @ (difference - gain) ** 2) / total
     standard_error = math.sqrt(max(spread, 0.0) / total)
     before = float(weight @ now) / float(weight.sum())
-    if not (gain < -confidence * standard_error and gain < 0.0):
+    fresh_before = float(tested_weight @ np.concatenate(tested_now)) / total
+    pays = gain < -confidence * standard_error and gain < 0.0
+    if not (pays or (refit and gain <= standard_error)):
         return Consolidation(
             False, tuple(positions), tuple(updates), len(reservoir), before, before, gain,
-            standard_error,
+            standard_error, fresh_before,
         )  # fmt: skip
     chosen = _best_fit(costs, weight, [current, anchored])
     ordered = _pair(current, chosen)
@@ -324,6 +376,7 @@ def consolidate(
         after,
         gain,
         standard_error,
+        fresh_before,
     )
 
 

@@ -228,6 +228,9 @@ class Learning(Generic[P]):
     """:attr:`Consolidation.baseline` of the last consolidation (``None``: none yet)."""
     accepted_at: int = 0
     """Target count at which the current references were accepted (or started)."""
+    fitted: int = 0
+    """Reservoir targets the current references were fitted to by a consolidation of
+    this epoch (0: they were not)."""
     block_cost: float = 0.0
     block_size: int = 0
 
@@ -586,6 +589,7 @@ class Fleet(Generic[P]):
                 learning.epoch = state.targets
                 learning.next_consolidation = state.targets + policy.first
                 learning.baseline = None
+                learning.fitted = 0
             learning.block_cost, learning.block_size = 0.0, 0
         if state.targets < learning.next_consolidation:
             if recorded is not None:
@@ -604,6 +608,9 @@ class Fleet(Generic[P]):
                 updates=state.updates,
                 fresh=state.targets - learning.accepted_at,
                 folds=policy.folds,
+                refit=policy.refit is not None
+                and learning.fitted > 0
+                and len(learning.reservoir) >= policy.refit * learning.fitted,
             )
         if len(done.positions) != len(self.vehicles) or len(done.updates) != len(self.vehicles):
             raise ReplayMismatch("a recorded consolidation does not match the fleet's vehicles")
@@ -613,7 +620,8 @@ class Fleet(Generic[P]):
             learning.anchor = list(done.positions)
             learning.holds = [None] * len(self.vehicles)
             learning.accepted_at = state.targets
-        learning.baseline = done.baseline
+            learning.fitted = done.sample
+        learning.baseline = done.fresh_baseline if policy.fresh_baseline else done.baseline
         learning.next_consolidation = policy.next_after(now=state.targets, epoch=learning.epoch)
         return done
 
@@ -793,8 +801,8 @@ class Fleet(Generic[P]):
         ]
 
     def _learning_dict(self) -> dict[str, Any]:
-        learning = self.state.learning
-        assert learning is not None
+        learning, policy = self.state.learning, self.config.consolidation
+        assert learning is not None and policy is not None
         encode = self.space.encode
         return {
             "holds": [
@@ -809,6 +817,7 @@ class Fleet(Generic[P]):
             "accepted_at": learning.accepted_at,
             "block_cost": learning.block_cost,
             "block_size": learning.block_size,
+            **({} if policy.refit is None else {"fitted": learning.fitted}),
         }
 
     def _learning_from(self, data: dict[str, Any]) -> Learning[P]:
@@ -835,6 +844,7 @@ class Fleet(Generic[P]):
             accepted_at=int(data["accepted_at"]),
             block_cost=float(data["block_cost"]),
             block_size=int(data["block_size"]),
+            fitted=int(data.get("fitted", 0)),
         )
 
     def restore(self, data: dict[str, Any]) -> None:

@@ -1,8 +1,8 @@
 """The hot route ``POST /v1/fleets/{id}/targets`` served straight from the ASGI layer.
 
-A target costs the service some tens of microseconds of search and update,
-while FastAPI's request machinery (routing, dependency resolution, exception
-middleware, response classes) costs several times that. This middleware sits
+A target's search and update are cheap next to FastAPI's request machinery
+(routing, dependency resolution, exception middleware, response classes);
+``bench/http_throughput.py`` measures the difference. This middleware sits
 directly inside the application's own middleware, the
 :class:`~routing_svc.service.guards.Guards` first (so the API key and the body
 limit apply unchanged), and :class:`~routing_svc.service.app.ServiceApp` sends

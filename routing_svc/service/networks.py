@@ -12,6 +12,7 @@ import numpy as np
 from routing_svc.errors import InvalidInput, InvalidNetwork, UnknownEdge, UnknownNetwork
 from routing_svc.network import CompiledNetwork, RoadSpace, Snapper, load_network
 from routing_svc.network.identity import network_sha256
+from routing_svc.network.osm_import import looks_like_osm, osm_to_net_bytes
 from routing_svc.network.safe_xml import check_net_xml_file, read_net_bytes
 from routing_svc.sa.space import Requirement
 from routing_svc.service.schemas import EdgePosition, LonLatPosition, Position, XYPosition
@@ -175,9 +176,20 @@ class NetworkRegistry:
     def store_upload(self, data: bytes | bytearray) -> tuple[str, Path]:
         """Check an uploaded network and write it under ``data_dir``; return its identity
         (:func:`~routing_svc.network.identity.network_sha256`, the same for the ``.gz``
-        and the plain file) and path."""
+        and the plain file) and path.
+
+        An upload whose root element is ``<osm>`` is an OpenStreetMap extract: it is
+        screened with the same limits and converted by netconvert
+        (:func:`~routing_svc.network.osm_import.osm_to_net_bytes`) first; the same
+        extract always gives the same network.
+        """
         if not data:
-            raise InvalidNetwork("empty upload: send the bytes of a .net.xml or .net.xml.gz")
+            raise InvalidNetwork(
+                "empty upload: send the bytes of a .net.xml or .net.xml.gz, "
+                "or of an OpenStreetMap .osm[.xml][.gz]"
+            )
+        if looks_like_osm(data):
+            data = osm_to_net_bytes(data, max_bytes=self.max_bytes)
         xml = read_net_bytes(data, max_bytes=self.max_bytes)
         digest = network_sha256(xml)
         self.data_dir.mkdir(parents=True, exist_ok=True)

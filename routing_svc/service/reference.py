@@ -26,8 +26,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from routing_svc.demand import DemandDistribution
-from routing_svc.demand import network as network_demand
-from routing_svc.errors import InvalidInput, UnknownEdge
+from routing_svc.demand.spec import network_demand, recipe_from_reference
+from routing_svc.errors import InvalidInput
 from routing_svc.optimum import candidate_sites, expected_cost, solve_pmedian
 from routing_svc.optimum.heterogeneous import (
     RequirementClass,
@@ -48,40 +48,11 @@ MAX_SITES = 1500
 
 
 def build_demand(entry: NetworkEntry, spec: dict[str, Any]) -> DemandDistribution[NetPosition]:
-    """The reference demand of a fleet from its stored spec."""
-    net = entry.network
-    kind = spec["kind"]
-    if kind == "uniform":
-        return network_demand.uniform_by_length(net)
-    if kind == "hotspots":
-        rng = np.random.default_rng(int(spec.get("seed", 0)))
-        return network_demand.hotspot_mixture(
-            net, centres=int(spec.get("count", 3)), spread=spec.get("spread"), rng=rng
-        )
-    if kind == "weights":
-        return weighted_edges(entry, spec.get("weights") or {})
-    raise InvalidInput(f"unknown reference demand kind {kind!r}")
-
-
-def weighted_edges(
-    entry: NetworkEntry, weights: dict[str, float]
-) -> DemandDistribution[NetPosition]:
-    """Demand with weight ``W_e`` per edge id, spread uniformly along each edge."""
-    net = entry.network
-    per_metre = np.zeros(net.n_edges)
-    for edge_id, weight in weights.items():
-        index = net.edge_index.get(edge_id)
-        if index is None:
-            raise UnknownEdge(f"reference demand names unknown edge {edge_id!r}")
-        per_metre[index] = float(weight) / float(net.length[index])
-    carrying = np.flatnonzero(per_metre > 0.0)
-    if carrying.size == 0:
-        raise InvalidInput("reference demand weights must give some edge a positive weight")
-    edges, offsets, pieces = network_demand.edge_pieces(
-        net, spacing=network_demand.DEFAULT_SPACING, edges=carrying
-    )
-    positions = tuple(NetPosition(int(e), float(o)) for e, o in zip(edges, offsets, strict=True))
-    return DemandDistribution.from_masses("weights", positions, pieces * per_metre[edges])
+    """The reference demand of a fleet from its stored spec
+    (:func:`routing_svc.demand.spec.recipe_from_reference`)."""
+    recipe = recipe_from_reference(spec)
+    rng = np.random.default_rng(int(spec.get("seed", 0)))
+    return network_demand(entry.network, recipe, rng=rng)
 
 
 def solve_reference(

@@ -133,7 +133,15 @@ class FleetSpec(Strict):
     counting: Literal["vehicle", "fleet"] = "vehicle"
     annealing: AnnealingSpec | None = None
     seed: Annotated[int, Field(ge=0, le=2**63 - 1)] = 0
-    vehicles: Annotated[list[VehicleSpec], Field(min_length=1, max_length=10_000)]
+    vehicles: Annotated[
+        list[VehicleSpec],
+        Field(
+            min_length=1,
+            max_length=10_000,
+            description="The fleet's vehicles; their ids must be unique (a rule JSON Schema "
+            "cannot state for objects: a repeated id is a 422).",
+        ),
+    ]
     start: StartSpec | None = None
     reference_demand: DemandSpec | None = None
     rule: (
@@ -261,52 +269,3 @@ class VehicleStateBatch(Strict):
     """Many vehicles' new states, applied together or not at all."""
 
     changes: Annotated[list[VehicleStateChange], Field(min_length=1, max_length=10_000)]
-
-
-class DescribedPosition(BaseModel):
-    """A position as the API shows it (``lon``/``lat`` where the network has a projection)."""
-
-    edge: str
-    offset: float
-    x: float
-    y: float
-    lon: float | None = None
-    lat: float | None = None
-
-
-class VehicleView(BaseModel):
-    """A vehicle: its reference (what learning moves) and its live state."""
-
-    id: str
-    type: str
-    speed: float
-    position: DescribedPosition = Field(description="The reference (kept for older clients).")
-    reference: DescribedPosition
-    status: VehicleStatus
-    current: DescribedPosition = Field(description="Where the vehicle is now.")
-    at_reference: bool = Field(description="Whether ``current`` follows the reference.")
-    timestamp: float | None
-    updates: int
-
-
-class VehicleStateResult(BaseModel):
-    """The ``vehicle_state`` event's result: the changed vehicles as they are now."""
-
-    seq: int
-    version: int
-    vehicles: list[VehicleView]
-
-
-class SentVehicle(BaseModel):
-    vehicle: str
-    type: str = Field(description="The required type it fills ('*': any one vehicle).")
-    cost: float = Field(description="Its travel time D / v from its current position.")
-
-
-class DispatchAnswer(BaseModel):
-    """Who goes now: per required type the closest available vehicles by current position."""
-
-    status: Literal["dispatched", "partial", "queued"]
-    vehicles: list[SentVehicle]
-    missing: list[str] = Field(description="One entry per required vehicle nobody fills.")
-    cost: float | None = Field(description="Completion cost: the last one's arrival.")

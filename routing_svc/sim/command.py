@@ -53,7 +53,12 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--warmup", type=float, default=600.0, help="traffic before requests (s)")
     p.add_argument("--drain", type=float, default=900.0, help="simulated after requests (s)")
     p.add_argument("--rate", type=float, default=60.0, help="requests per hour")
-    p.add_argument("--demand", default="hotspots:3", help="uniform | hotspots[:K] | weights file")
+    p.add_argument(
+        "--demand",
+        default="hotspots:3",
+        help="uniform | hotspots[:K] | weights:FILE | buildings:FILE, optionally "
+        "?profile=FILE (24 hourly rate weights); see routing_svc.demand.spec",
+    )
     p.add_argument("--demand-seed", type=int, default=1, help="seed of the hotspot layout")
     p.add_argument("--shift-at", type=float, default=None, help="hotspots move after S seconds")
     p.add_argument("--density", type=float, default=10.0, help="background vehicles/h/km")

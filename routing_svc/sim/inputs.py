@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-from routing_svc.nets import sumo_home
+from routing_svc.network.sumo_tools import sumo_home
 from routing_svc.sim.backend import PARK_SECONDS, SimulationError
 
 __all__ = [

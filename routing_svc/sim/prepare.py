@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from routing_svc.demand import DemandDistribution
+from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork, RoadSpace, load_network
 from routing_svc.sim.backend import make_backend
 from routing_svc.sim.inputs import FleetVehicle, Request, random_trips, sumo_options, write_persons
@@ -36,6 +37,7 @@ from routing_svc.sim.scenario import (
     Optimum,
     build_demand,
     demand_at,
+    demand_profile,
     empirical_demand,
     expected_wait,
     fleet_vehicles,
@@ -276,6 +278,9 @@ def prepare_seeds(spec: CosimSpec, *, out_dir: Path, progress: bool) -> Prepared
             net, workdir / "background.trips.xml", seed=seed, end=spec.end, density=spec.density
         )
     phases = _phases(spec, network) if spec.mode == "persons" else None
+    profile = demand_profile(spec.demand) if "?profile=" in spec.demand else None
+    if profile is not None and phases is None:
+        raise InvalidInput("a time-of-day profile applies to persons; incidents follow the traffic")
     start, stop = spec.warmup, spec.warmup + spec.duration
     if phases is not None:
         destinations = Destinations(network, uniform_by_length(network), radius=spec.ride_radius)
@@ -288,6 +293,7 @@ def prepare_seeds(spec: CosimSpec, *, out_dir: Path, progress: bool) -> Prepared
                 rate_per_hour=spec.rate,
                 start=start,
                 end=stop,
+                profile=profile,
             )
             for s in spec.seeds
         }

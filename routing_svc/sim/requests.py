@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from routing_svc.demand import DemandDistribution
+from routing_svc.demand.profile import HourlyProfile
 from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork
 from routing_svc.sim.backend import SimBackend
@@ -124,6 +125,7 @@ def person_requests(
     rate_per_hour: float,
     start: float,
     end: float,
+    profile: HourlyProfile | None = None,
 ) -> list[Request]:
     """Persons asking for rides at Poisson times from the active phase's distribution.
 
@@ -139,6 +141,10 @@ def person_requests(
         The only source of randomness.
     rate_per_hour, start, end : float
         The Poisson process of request times.
+    profile : HourlyProfile, optional
+        A time-of-day profile: the rate at ``t`` is ``rate_per_hour * profile.factor(t)``,
+        drawn by thinning a stream at the largest rate
+        (:mod:`routing_svc.demand.profile`). Without one the rate is constant.
     """
     if not phases or phases[0].start > start:
         raise InvalidInput("the first demand phase must start at or before the first request")
@@ -146,9 +152,12 @@ def person_requests(
     if starts != sorted(starts):
         raise InvalidInput("demand phases must be sorted by start time")
     requests = []
-    for number, t in enumerate(
-        poisson_times(rng, rate_per_hour=rate_per_hour, start=start, end=end)
-    ):
+    top = 1.0 if profile is None else profile.largest_factor
+    times = poisson_times(rng, rate_per_hour=rate_per_hour * top, start=start, end=end)
+    if profile is not None:
+        keep = rng.random(len(times)) * top < [profile.factor(t) for t in times]
+        times = [t for t, kept in zip(times, keep, strict=True) if kept]
+    for number, t in enumerate(times):
         phase = phases[int(np.searchsorted(starts, t, side="right")) - 1]
         (origin,) = phase.demand.sample(rng, 1)
         to = destinations.draw(rng, origin.edge)

@@ -18,11 +18,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from routing_svc.demand import DemandDistribution
+from routing_svc.demand.profile import HourlyProfile
+from routing_svc.demand.spec import network_demand, parse_demand_spec
 from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork, RoadSpace
 from routing_svc.sim.inputs import FleetVehicle, Request
@@ -33,6 +34,7 @@ __all__ = [
     "Optimum",
     "build_demand",
     "demand_at",
+    "demand_profile",
     "empirical_demand",
     "fleet_vehicles",
     "mixed_demand",
@@ -57,21 +59,13 @@ class Optimum:
 def build_demand(
     network: CompiledNetwork, spec: str, *, rng: np.random.Generator
 ) -> DemandDistribution[NetPosition]:
-    """A demand distribution from ``uniform``, ``hotspots[:K]`` or a weights file."""
-    from routing_svc.demand import from_weights_file, hotspot_mixture, uniform_by_length
+    """The distribution of a ``--demand`` spec (:mod:`routing_svc.demand.spec`)."""
+    return network_demand(network, parse_demand_spec(spec), rng=rng)
 
-    kind, _, arg = spec.partition(":")
-    if kind == "uniform":
-        return uniform_by_length(network)
-    if kind == "hotspots":
-        try:
-            count = int(arg) if arg else 3
-        except ValueError:
-            raise InvalidInput(f"hotspots needs a count, got {spec!r}") from None
-        return hotspot_mixture(network, centres=count, rng=rng)
-    if Path(spec).is_file():
-        return from_weights_file(network, Path(spec))
-    raise InvalidInput(f"demand must be 'uniform', 'hotspots[:K]' or a weights file, got {spec!r}")
+
+def demand_profile(spec: str) -> HourlyProfile | None:
+    """The time-of-day profile of a ``--demand`` spec (``?profile=FILE``), if any."""
+    return parse_demand_spec(spec).profile
 
 
 def start_positions(

@@ -2,9 +2,9 @@
 
 By default SQLite checkpoints inside the ``COMMIT`` that takes the log past
 1000 pages: that commit then also copies the pages into the database file and
-waits for its ``fsync``, tens to a hundred milliseconds more, and every request
-of its group waits with it. The store's connections therefore do not
-checkpoint (``PRAGMA wal_autocheckpoint = 0``, see
+waits for its ``fsync``, and every request of its group waits with it. The
+store's connections therefore do not checkpoint
+(``PRAGMA wal_autocheckpoint = 0``, see
 :func:`routing_svc.store.engine.create_store_engine`); a :class:`WalCheckpointer`
 runs passive checkpoints, which never block readers or writers, a few times a
 second beside them. The log is restarted from its beginning by the first

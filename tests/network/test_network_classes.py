@@ -21,8 +21,8 @@ from routing_svc.network.layout import EndStateClasses, end_state_classes
 from routing_svc.network.search import ARC_DTYPE, fleet_columns, search_arcs
 from routing_svc.sa.space import Requirement
 from routing_svc.types import NetPosition
+from tests.helpers import run_queries
 from tests.network.conftest import NetCase
-from tests.network.test_network_search import run_queries
 
 
 def successor_sets(case: NetCase) -> list[frozenset[int]]:

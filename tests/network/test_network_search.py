@@ -2,113 +2,15 @@
 
 from __future__ import annotations
 
-import itertools
-from collections.abc import Mapping
-
 import numpy as np
 import pytest
 
 from routing_svc.errors import InvalidInput, UnmetRequirement, Unreachable
 from routing_svc.network import CompiledNetwork, NetworkReduction, RoadSpace
-from routing_svc.sa.space import Assignment, Requirement
+from routing_svc.sa.space import Requirement
 from routing_svc.types import NetPosition
+from tests.helpers import check_assignment, reference_times, run_queries
 from tests.network.conftest import NetCase
-
-RTOL = 1e-9
-
-
-def reference_times(
-    case: NetCase,
-    costs: Mapping[str, float],
-    weighted: object,
-    target: NetPosition,
-    positions: list[NetPosition],
-    speeds: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Each vehicle's cost and time to ``target`` according to networkx."""
-    ref = case.reference
-    start = ref.start_costs(case.ids(target), costs, weighted)
-    cost = np.array(
-        [ref.vehicle_cost(case.ids(p), case.ids(target), costs, start) for p in positions]
-    )
-    return cost, cost / speeds
-
-
-def check_assignment(
-    case: NetCase,
-    space: RoadSpace,
-    result: Assignment[NetPosition],
-    target: NetPosition,
-    positions: list[NetPosition],
-    requirement: Requirement,
-    ref_cost: np.ndarray,
-    ref_time: np.ndarray,
-) -> None:
-    """Served vehicles, times, mover and route agree with the reference costs."""
-    groups, counts = requirement.vehicle_groups, requirement.counts
-    served = list(result.served_by)
-    slot = 0
-    for g, k in enumerate(counts.tolist()):
-        ours = served[slot : slot + k]
-        members = np.flatnonzero(groups == g).tolist()
-        expected = sorted(members, key=lambda i: (ref_time[i], i))[:k]
-        our_times = np.array(result.times[slot : slot + k])
-        np.testing.assert_allclose(our_times, ref_time[expected], rtol=RTOL)
-        np.testing.assert_allclose(our_times, ref_time[ours], rtol=RTOL)
-        candidates = np.sort(ref_time[members])
-        gaps = np.diff(candidates[: k + 1]) if len(candidates) > k else np.diff(candidates)
-        if (gaps > RTOL * np.maximum(candidates[1 : len(gaps) + 1], 1.0)).all():
-            assert ours == expected
-        slot += k
-    times = np.array(result.times)
-    last = max(range(len(served)), key=lambda j: (times[j], -served[j]))
-    assert result.mover == served[last]
-    assert result.completion_time == times[last]
-    np.testing.assert_allclose(result.mover_cost, ref_cost[result.mover], rtol=RTOL)
-    check_route(case, space, result, positions[result.mover], target)
-
-
-def check_route(
-    case: NetCase,
-    space: RoadSpace,
-    result: Assignment[NetPosition],
-    position: NetPosition,
-    target: NetPosition,
-) -> None:
-    """The route is a connected edge path from the mover to the target that costs mover_cost."""
-    route = result.route
-    assert isinstance(route, np.ndarray)
-    assert route[0] == position.edge and route[-1] == target.edge
-    ids = [case.network.edge_ids[e] for e in route]
-    assert all(case.reference.graph.has_edge(a, b) for a, b in itertools.pairwise(ids))
-    rate, cost = space.edge_costs.rate, space.edge_costs.cost
-    if len(route) == 1:
-        walked = (target.offset - position.offset) * rate[target.edge]
-    else:
-        walked = (
-            (case.network.length[position.edge] - position.offset) * rate[position.edge]
-            + cost[route[1:-1]].sum()
-            + target.offset * rate[target.edge]
-        )
-    np.testing.assert_allclose(walked, result.mover_cost, rtol=RTOL, atol=1e-9)
-
-
-def run_queries(
-    case: NetCase,
-    space: RoadSpace,
-    rng: np.random.Generator,
-    *,
-    n_targets: int,
-    positions: list[NetPosition],
-    speeds: np.ndarray,
-    requirement: Requirement,
-    costs: Mapping[str, float],
-) -> None:
-    weighted = case.reference.weighted(costs)
-    for target in case.random_positions(rng, n_targets):
-        result = space.assign(target, positions, speeds, requirement)
-        ref_cost, ref_time = reference_times(case, costs, weighted, target, positions, speeds)
-        check_assignment(case, space, result, target, positions, requirement, ref_cost, ref_time)
 
 
 def test_nearest_vehicle_matches_networkx(case: NetCase, space: RoadSpace) -> None:

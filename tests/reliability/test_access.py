@@ -7,10 +7,8 @@ from pathlib import Path
 from fastapi.testclient import TestClient
 
 from routing_svc.service.app import create_app
-from tests.reliability.workload import fleet_body, target_stream
+from tests.helpers import every_route, fast_answers, fleet_body, target_stream
 from tests.service.conftest import make_settings
-from tests.service.test_bad_input import every_route
-from tests.service.test_fast_path import fast_answers
 
 ALLOWED = "https://dispatch.example"
 

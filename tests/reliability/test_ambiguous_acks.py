@@ -23,8 +23,8 @@ from pathlib import Path
 import httpx
 
 from routing_svc.store import EventLog
+from tests.helpers import fleet_body, target_stream
 from tests.reliability.conftest import Server, record_figures, replay, scaled
-from tests.reliability.workload import fleet_body, target_stream
 
 CLIENT_TIMEOUT_S = 0.5
 HOLD_S = 0.8  # longer than the client timeout

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import httpx
 
+from tests.helpers import fleet_body, target_stream
 from tests.reliability.conftest import (
     Server,
     integrity,
@@ -24,7 +25,6 @@ from tests.reliability.conftest import (
     scaled,
     serial_replay,
 )
-from tests.reliability.workload import fleet_body, target_stream
 
 CLIENTS = 16
 

@@ -21,8 +21,8 @@ import httpx
 import numpy as np
 
 from routing_svc.store import EventLog
+from tests.helpers import fleet_body, target_stream
 from tests.reliability.conftest import SCALE, Server, integrity, record_figures, replay, scaled
-from tests.reliability.workload import fleet_body, target_stream
 
 FLEETS = ("c1", "c2", "c3", "c4")
 

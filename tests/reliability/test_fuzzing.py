@@ -1,63 +1,94 @@
-"""Issue 6, item 5: schemathesis against the app's own OpenAPI schema, in process (ASGI).
+"""The OpenAPI contract, fuzzed with every schemathesis check against a live server.
 
-0 server errors and 0 response-schema violations over every operation (the SSE
-stream excepted: it never ends), ``max_examples`` bounded for CI.
+A real ``routing-svc serve`` (uvicorn on a socket) with one fleet; schemathesis
+reads its ``/openapi.json`` and the repository's ``schemathesis.toml`` (the
+rules JSON Schema cannot state), then
+
+- each operation with generated requests, valid and invalid (``parametrize``:
+  examples, coverage - undeclared methods included - and fuzzing), and
+- sequences of operations linked by the ids they return (the state machine),
+
+and every response must pass **all** checks: no server error, declared status,
+content type, headers and body schema, invalid requests rejected, valid ones
+accepted, ``Allow`` on 405, deleted resources gone, ...
+
+Seeded (``ROUTING_SVC_FUZZ_SEED``, default :data:`DEFAULT_SEED`); the number of
+examples is bounded for CI and scales with ``ROUTING_SVC_SOAK_SCALE``.
 """
 
 from __future__ import annotations
 
+import os
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import httpx
+import pytest
 import schemathesis
-from fastapi.testclient import TestClient
-from hypothesis import HealthCheck, given, settings
-from schemathesis.checks import not_a_server_error
-from schemathesis.core.errors import InvalidSchema
-from schemathesis.core.result import Err, Ok
-from schemathesis.schemas import APIOperation
-from schemathesis.specs.openapi.checks import response_schema_conformance
+from hypothesis import HealthCheck, seed, settings
+from schemathesis.config import SchemathesisConfig
+from schemathesis.schemas import BaseSchema
 
-from routing_svc.service.app import create_app
-from tests.reliability.conftest import record_figures, scaled
-from tests.reliability.workload import fleet_body
-from tests.service.conftest import make_settings
+from tests.helpers import fleet_body
+from tests.reliability.conftest import Server, scaled
 
+DEFAULT_SEED = 20261125
+SEED = int(os.environ.get("ROUTING_SVC_FUZZ_SEED", str(DEFAULT_SEED)))
+REPO = Path(__file__).resolve().parents[2]
+EXAMPLES = scaled(25)
+"""Generated requests per operation and phase (and state machine runs)."""
 
-def _operation(
-    result: Ok[APIOperation[Any, Any, Any, Any]] | Err[InvalidSchema],
-) -> APIOperation[Any, Any, Any, Any]:
-    """The operation of a schema entry; a schema error fails the test."""
-    if isinstance(result, Err):
-        raise AssertionError(f"the OpenAPI document has an invalid operation: {result.err()}")
-    return result.ok()
+FUZZ_SETTINGS = settings(
+    max_examples=EXAMPLES,
+    deadline=None,
+    suppress_health_check=list(HealthCheck),
+    database=None,
+)
 
 
-def test_schemathesis_finds_no_server_error(sqlite_url: str, tmp_path: Path) -> None:
-    app = create_app(make_settings(sqlite_url, tmp_path))
-    calls = 0
-    with TestClient(app) as c:
-        c.post("/v1/fleets", json=fleet_body()).raise_for_status()
-        schema = schemathesis.openapi.from_asgi("/openapi.json", app)
-        operations = [_operation(r) for r in schema.get_all_operations()]
-        operations = [op for op in operations if not op.path.endswith("/stream")]
-        for op in operations:
+@pytest.fixture(scope="module")
+def live_api(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    """A live server on its own SQLite file, with one fleet (``f1``) to find."""
+    tmp = tmp_path_factory.mktemp("fuzzing")
+    server = Server(f"sqlite:///{tmp / 'events.db'}", tmp)
+    try:
+        server.start()
+        httpx.post(server.url + "/v1/fleets", json=fleet_body(), timeout=60).raise_for_status()
+        yield server
+    finally:
+        server.stop()
 
-            @given(case=op.as_strategy())
-            @settings(
-                max_examples=scaled(30),
-                deadline=None,
-                suppress_health_check=list(HealthCheck),
-                database=None,
-            )
-            def check(case: schemathesis.Case[Any]) -> None:
-                nonlocal calls
-                calls += 1
-                case.call_and_validate(checks=[not_a_server_error, response_schema_conformance])
 
-            check()
-    record_figures(
-        "schemathesis",
-        {"operations": len(operations), "calls": calls, "server_errors": 0},
-        tmp_path,
+@pytest.fixture(scope="module")
+def api_schema(live_api: Server) -> BaseSchema:
+    """The live server's OpenAPI document with the project's schemathesis configuration."""
+    config = SchemathesisConfig.from_path(str(REPO / "schemathesis.toml"))
+    config.update(seed=SEED, max_failures=None)
+    return schemathesis.openapi.from_url(live_api.url + "/openapi.json", config=config)
+
+
+schema = schemathesis.pytest.from_fixture("api_schema")
+
+
+@schema.parametrize()
+@seed(SEED)
+@FUZZ_SETTINGS
+def test_every_operation_keeps_the_contract(case: schemathesis.Case[Any]) -> None:
+    case.call_and_validate(timeout=30)
+
+
+def test_linked_operations_keep_the_contract(api_schema: BaseSchema) -> None:
+    """Create, read, serve, delete ... in generated orders, along the links schemathesis
+    infers from the ids the answers carry (``use_after_free`` and
+    ``ensure_resource_availability`` among the checks)."""
+    machine = seed(SEED)(api_schema.as_state_machine())
+    machine.run(
+        settings=settings(
+            max_examples=EXAMPLES,
+            deadline=None,
+            suppress_health_check=list(HealthCheck),
+            database=None,
+            stateful_step_count=6,
+        )
     )

@@ -18,8 +18,8 @@ from typing import Any
 import httpx
 
 from routing_svc.store import EventLog
+from tests.helpers import fleet_body, target_stream
 from tests.reliability.conftest import Server, integrity, record_figures, replay, scaled
-from tests.reliability.workload import fleet_body, target_stream
 
 CLIENTS = 6
 

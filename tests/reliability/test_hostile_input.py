@@ -19,8 +19,8 @@ from pathlib import Path
 import httpx
 
 from routing_svc.network.xml_limits import MAX_ATTRIBUTE_BYTES, MAX_ATTRIBUTES, MAX_TEXT_CHARS
+from tests.helpers import fleet_body
 from tests.reliability.conftest import Server, record_figures, vm_kib
-from tests.reliability.workload import fleet_body
 
 MiB = 1024 * 1024
 

@@ -21,15 +21,16 @@ import httpx
 from sqlalchemy.engine import make_url
 
 from tests.conftest import pg_url
-from tests.reliability.conftest import Server, record_figures, replay
-from tests.reliability.pgproxy import TcpProxy
-from tests.reliability.test_storage_faults import (
+from tests.helpers import (
     check_log,
     check_store_problem,
+    fleet_body,
     settle_keys,
+    target_stream,
     wait_health,
 )
-from tests.reliability.workload import fleet_body, target_stream
+from tests.reliability.conftest import Server, record_figures, replay
+from tests.reliability.pgproxy import TcpProxy
 
 REQUEST_S = 1.5
 HEALTH_S = 1.0

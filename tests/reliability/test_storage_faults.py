@@ -27,78 +27,17 @@ import httpx
 import pytest
 from sqlalchemy.engine import make_url
 
-from routing_svc.store import EventLog
 from tests.conftest import pg_url
+from tests.helpers import (
+    check_log,
+    check_store_problem,
+    fleet_body,
+    settle_keys,
+    target_stream,
+    wait_health,
+)
 from tests.reliability.conftest import Server, integrity, record_figures, replay
 from tests.reliability.pgproxy import TcpProxy
-from tests.reliability.workload import fleet_body, target_stream
-
-STORE_TYPES = {
-    "urn:routing-svc:problem:storage-unavailable",
-    "urn:routing-svc:problem:storage-timeout",
-    "urn:routing-svc:problem:commit-outcome-unknown",
-}
-LEAKS = ("sqlalche.me", "psycopg", "sqlite3", "pysqlite", "OperationalError", "Traceback")
-
-
-def check_store_problem(r: httpx.Response, secrets: tuple[str, ...], log: Path) -> str:
-    """A 503 from the store: problem+json, stable type, Retry-After, error id in the
-    server's log, nothing internal in the answer. Returns its type."""
-    assert r.status_code == 503, r.text
-    assert r.headers["content-type"] == "application/problem+json"
-    assert int(r.headers["retry-after"]) >= 1
-    body = r.json()
-    assert body["type"] in STORE_TYPES, body
-    assert len(body["detail"]) < 120 and body["error_id"]
-    answer = r.text + "".join(f"{k}: {v}" for k, v in r.headers.items())
-    for leak in (*LEAKS, *secrets):
-        assert leak not in answer, (leak, answer)
-    deadline = time.monotonic() + 5
-    while body["error_id"] not in log.read_text(errors="replace"):
-        assert time.monotonic() < deadline, "the error id is not in the server's log"
-        time.sleep(0.05)
-    return str(body["type"])
-
-
-def wait_health(url: str, status: int, within_s: float = 20) -> tuple[dict[str, Any], float]:
-    """Poll ``/healthz`` until it answers ``status``; its body and the seconds it took."""
-    started = time.monotonic()
-    while True:
-        r = httpx.get(url + "/healthz", timeout=10)
-        if r.status_code == status:
-            if status == 503:
-                assert int(r.headers["retry-after"]) >= 1 and r.json()["reason"]
-            return r.json(), time.monotonic() - started
-        assert time.monotonic() - started < within_s, r.text
-        time.sleep(0.1)
-
-
-def settle_keys(
-    http: httpx.Client, fleet: str, keyed: dict[str, dict[str, Any]], acked: dict[str, bytes]
-) -> None:
-    """Post every key (again) until each has an answer; acknowledged ones must not change."""
-    for key, body in keyed.items():
-        for _ in range(50):
-            r = http.post(
-                f"/v1/fleets/{fleet}/targets", json=body, headers={"Idempotency-Key": key}
-            )
-            if r.status_code == 200:
-                break
-            time.sleep(0.2)
-        assert r.status_code == 200, r.text
-        assert acked.setdefault(key, r.content) == r.content
-
-
-def check_log(db_url: str, fleet: str, acked: dict[str, bytes]) -> int:
-    """Every acknowledged key is stored once, with the answer its client got."""
-    with EventLog(db_url) as log:
-        stored = log.events_since(fleet, 0)[1:]
-    keys = [e.idempotency_key for e in stored]
-    assert len(keys) == len(set(keys)) == len(acked)
-    for e in stored:
-        assert e.result_json is not None
-        assert e.result_json.encode() == acked[str(e.idempotency_key)]
-    return len(stored)
 
 
 @pytest.fixture

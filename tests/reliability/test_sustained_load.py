@@ -13,8 +13,8 @@ from pathlib import Path
 import httpx
 import numpy as np
 
+from tests.helpers import fleet_body, target_stream
 from tests.reliability.conftest import Server, record_figures, scaled, vm_kib
-from tests.reliability.workload import fleet_body, target_stream
 
 RATE = 40.0
 RSS_GROWTH_BOUND_MIB = 50

@@ -18,13 +18,9 @@ from typing import Any
 import httpx
 import numpy as np
 
-from routing_svc.network import load_network
 from routing_svc.store import EventLog
+from tests.helpers import edge, fleet_body, target_stream
 from tests.reliability.conftest import Server, integrity, replay, serial_replay
-from tests.reliability.workload import fleet_body, target_stream
-from tests.service.conftest import DRT
-
-EDGE_IDS = load_network(DRT).edge_ids
 
 REQUESTS = 120
 KILLS = 2
@@ -39,7 +35,7 @@ def requests() -> list[tuple[str, str, dict[str, Any]]]:
     for i in range(REQUESTS):
         vid = f"v{1 + i % 3}"
         if i % 6 == 0:
-            where = {"edge": EDGE_IDS[int(rng.integers(0, 400))], "offset": 0.0}
+            where = {"edge": edge(int(rng.integers(0, 400))), "offset": 0.0}
             body = {"status": statuses[i % 4], "position": where, "timestamp": float(i)}
             out.append(("PUT", f"/v1/fleets/s1/vehicles/{vid}/state", body))
         elif i % 6 == 3:

@@ -293,21 +293,29 @@ def test_the_cross_validated_gain_by_hand(space: RoadSpace, power: float, speed:
                 space, start, reservoir, fitted, fresh=fresh, power=power, speed=speed
             )
             assert n == min(fresh, m)
-            for confidence in (0.0, 1.0):
+            now = service_costs(space, start, reservoir, power, speed).min(axis=0)
+            fresh_before = math.fsum(now[m - n :].tolist()) / n
+            for confidence, refit in ((0.0, False), (1.0, False), (0.0, True), (1.0, True)):
                 done = consolidate(
                     space, start, anchor, reservoir, power=power, speed=speed,
-                    confidence=confidence, updates=[5], fresh=fresh,
+                    confidence=confidence, updates=[5], fresh=fresh, refit=refit,
                 )  # fmt: skip
                 scale = done.sample_before
                 assert done.gain == pytest.approx(gain, rel=1e-9, abs=1e-12 * scale)
                 assert done.standard_error == pytest.approx(
                     standard_error, rel=1e-9, abs=1e-12 * scale
                 )
-                accepted = gain < -confidence * standard_error and gain < 0.0
+                pays = gain < -confidence * standard_error and gain < 0.0
+                # a refit is taken unless it tests worse by more than one standard error
+                accepted = pays or (refit and gain <= standard_error)
                 assert done.accepted is accepted
                 decisions.add(accepted)
                 before = sample_objective(space, start, reservoir, power, speed) / m
                 assert done.sample_before == pytest.approx(before, rel=1e-12)
+                assert done.fresh_before == pytest.approx(fresh_before, rel=1e-12)
+                assert done.fresh_baseline == pytest.approx(
+                    fresh_before + (done.gain if accepted else 0.0), rel=1e-12
+                )
                 if accepted:
                     # the whole reservoir's 1-median, which serves all of it
                     assert done.positions[0] in full_sites
@@ -316,7 +324,7 @@ def test_the_cross_validated_gain_by_hand(space: RoadSpace, power: float, speed:
                     )
                     assert done.updates == (m,)
                     assert done.sample_after == pytest.approx(full[best_full].sum() / m, rel=1e-9)
-                    assert done.baseline == done.sample_before + done.gain
+                    assert done.baseline == done.sample_before + min(done.gain, 0.0)
                 else:
                     assert done.positions == tuple(start) and done.updates == (5,)
                     assert done.sample_after == done.sample_before
@@ -331,6 +339,64 @@ def test_the_cross_validated_gain_by_hand(space: RoadSpace, power: float, speed:
                     )  # fmt: skip
                     assert done.accepted is accepted
     assert decisions == {True, False}
+
+
+def test_a_refit_is_taken_unless_it_tests_worse_by_more_than_one_standard_error(
+    space: RoadSpace,
+) -> None:
+    # references fitted to the first half of a reservoir, tested on the second half: find
+    # reservoirs where the fit of the whole tests a little worse (0 < gain <= one standard
+    # error) and a little better, and check both decisions with and without refit
+    seen = set()
+    for seed in range(40):
+        _, reservoir = demand_stream(seed, 60)
+        half = reservoir[:30]
+        sites = sites_of(space, half, poor_start(2), [])
+        costs = service_costs(space, sites, half, 1.0)
+        _, rows = brute_force(costs, 2)
+        start = [sites[i] for i in rows]
+        plain, refit = (
+            consolidate(
+                space,
+                start,
+                start,
+                reservoir,
+                power=1.0,
+                speed=1.0,
+                confidence=0.0,
+                updates=[1, 1],
+                fresh=30,
+                refit=flag,
+            )
+            for flag in (False, True)
+        )
+        assert plain.gain == refit.gain and plain.standard_error == refit.standard_error
+        if 0.0 < plain.gain <= plain.standard_error:
+            assert plain.accepted is False and plain.positions == tuple(start)
+            assert refit.accepted is True
+            assert set(refit.positions) == set(plain_fit(space, reservoir))
+            seen.add("refit only")
+        elif plain.gain > plain.standard_error:
+            assert plain.accepted is refit.accepted is False
+            seen.add("neither")
+        elif plain.gain < 0.0:
+            assert plain.accepted is refit.accepted is True
+            assert refit.positions == plain.positions
+            seen.add("both")
+        if len(seen) == 3:
+            break
+    assert "refit only" in seen and "both" in seen
+
+
+def plain_fit(space: RoadSpace, reservoir: Sequence[NetPosition]) -> tuple[NetPosition, ...]:
+    """What a consolidation that is taken puts in place: a test with every target fresh
+    against references that serve nothing well."""
+    done = consolidate(
+        space, poor_start(2), poor_start(2), reservoir, power=1.0, speed=1.0,
+        confidence=0.0, updates=[1, 1], fresh=len(reservoir),
+    )  # fmt: skip
+    assert done.accepted
+    return done.positions
 
 
 def test_without_fresh_targets_nothing_is_tested(space: RoadSpace) -> None:
@@ -455,6 +521,17 @@ def test_the_baseline_of_a_record() -> None:
     assert kept.baseline == 10.5 - 1.25
     assert Consolidation(False, kept.positions, (4,), 8, 10.5, 10.5, -1.25, 0.5).baseline == 10.5
     assert Consolidation(True, kept.positions, (4,), 8, 10.5, 9.0, 0.75, 0.5).baseline == 10.5
+    # without a fresh cost (records before it), the fresh baseline is the baseline
+    assert kept.fresh_baseline == kept.baseline
+    fresh = Consolidation(True, kept.positions, (4,), 8, 10.5, 9.25, -1.25, 0.5, 12.0)
+    assert fresh.fresh_baseline == 12.0 - 1.25
+    refit = Consolidation(True, kept.positions, (4,), 8, 10.5, 9.0, 0.25, 0.5, 12.0)
+    assert refit.fresh_baseline == 12.0 + 0.25
+    kept_fresh = Consolidation(False, kept.positions, (4,), 8, 10.5, 10.5, 0.75, 0.5, 12.0)
+    assert kept_fresh.fresh_baseline == 12.0
+    data = json.loads(json.dumps(fresh.to_dict(lambda p: {"edge": p.edge, "offset": p.offset})))
+    assert data["fresh_before"] == 12.0
+    assert "fresh_before" not in kept.to_dict(lambda p: {"edge": p.edge, "offset": p.offset})
 
 
 @pytest.mark.parametrize(
@@ -549,11 +626,20 @@ def test_policy_round_trip() -> None:
             confidence=0.5,
             block=40,
             shift_ratio=1.5,
+            refit=3.0,
+            fresh_baseline=False,
         ),
+        ConsolidationPolicy(refit=None),
     ):
         data = json.loads(json.dumps(policy.to_dict()))
         assert ConsolidationPolicy.from_dict(data) == policy
-    assert ConsolidationPolicy.from_dict({}) == ConsolidationPolicy()
+    # a policy stored before refit and the fresh baseline keeps the behaviour it had
+    assert ConsolidationPolicy.from_dict({}) == ConsolidationPolicy(
+        refit=None, fresh_baseline=False
+    )
+    for wrong in ({"refit": 1.0}, {"refit": True}, {"refit": "2"}, {"fresh_baseline": 1}):
+        with pytest.raises(InvalidInput):
+            ConsolidationPolicy.from_dict(wrong)
     with pytest.raises(InvalidInput):
         ConsolidationPolicy.from_dict({"period": 3})
     with pytest.raises(InvalidInput):
@@ -622,6 +708,7 @@ def test_policy_defaults() -> None:
         0.0,
         1.25,
     )
+    assert (policy.refit, policy.fresh_baseline) == (1.5, True)
 
 
 Run = tuple[list[NetPosition], Fleet[NetPosition], list[Any]]
@@ -949,6 +1036,24 @@ def test_old_configs_keep_their_rule_and_their_bytes() -> None:
     paper = FleetConfig.from_dict(paper_dict)
     assert paper.rule is Rule.PAPER and paper.probe is None
     assert json.dumps(paper.to_dict()) == json.dumps(paper_dict)
+
+
+def test_a_consolidating_config_stored_before_refit_keeps_its_behaviour_and_bytes(
+    space: RoadSpace,
+) -> None:
+    stored = learning_config(
+        "consolidating", typical_cost=space.typical_cost(), n_vehicles=4, objective=ROUTING
+    ).to_dict()
+    assert stored["consolidation"]["refit"] == 1.5
+    assert stored["consolidation"]["fresh_baseline"] is True
+    del stored["consolidation"]["refit"], stored["consolidation"]["fresh_baseline"]
+    old = FleetConfig.from_dict(json.loads(json.dumps(stored)))
+    assert old.consolidation is not None
+    assert old.consolidation.refit is None and old.consolidation.fresh_baseline is False
+    assert json.dumps(old.to_dict()) == json.dumps(stored)
+    # its fleet keeps no refit state in its snapshot, as before
+    fleet = Fleet.create(space, [(Vehicle(f"v{i}"), p) for i, p in enumerate(poor_start(4))], old)
+    assert "fitted" not in fleet.snapshot()["learning"]
 
 
 def test_a_consolidating_config_round_trips(space: RoadSpace) -> None:

@@ -204,11 +204,7 @@ def test_kept_back_probes_are_those_of_the_current_references(
     for k, z in enumerate(_stream(network, 3, 400)):
         if k == 200:  # new travel times: every probe window is measured anew
             kept.space = fresh.space = slower
-        fresh._probe_cache = None
-        assert isinstance(kept.space, RoadSpace)
-        state = kept.state
-        expected = kept.space.back_probes(state.positions, 10.0, state.entries)
-        assert kept._back_probes(kept.space, 10.0) == expected
+        fresh.restore(fresh.snapshot())  # new position objects: every probe measured anew
         one, two = kept.observe(z), fresh.observe(z)
         assert (one.new_position, one.backed_off) == (two.new_position, two.backed_off)
         assert kept.state.positions == fresh.state.positions

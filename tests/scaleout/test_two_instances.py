@@ -18,9 +18,8 @@ from typing import Any
 import httpx
 
 from routing_svc.service.fleets import SNAPSHOT_EVERY
+from tests.helpers import fleet_body, replay_ok, targets
 from tests.service.conftest import LiveServer
-from tests.service.test_api import fleet_body
-from tests.service.test_durability import replay_ok, targets
 
 FLEETS = ("f1", "f2")
 

@@ -8,30 +8,12 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from routing_svc.network import RoadSpace, load_network
+from routing_svc.network import RoadSpace
 from routing_svc.types import NetPosition
+from tests.helpers import NET, edge, fleet_body
 from tests.service.conftest import DRT
 
-NET = load_network(DRT)
 SPACE = RoadSpace(NET, cost="length")
-
-
-def edge(i: int) -> str:
-    return NET.edge_ids[i]
-
-
-def fleet_body(fleet_id: str = "f1", **extra: Any) -> dict[str, Any]:
-    body: dict[str, Any] = {
-        "id": fleet_id,
-        "network": "drt",
-        "vehicles": [
-            {"id": "v1", "position": {"edge": edge(0), "offset": 1.0}},
-            {"id": "v2", "position": {"edge": edge(100), "offset": 0.0}},
-            {"id": "v3", "position": {"edge": edge(300), "offset": 2.5}},
-        ],
-    }
-    body.update(extra)
-    return body
 
 
 def test_full_life_of_a_fleet(client: TestClient) -> None:

@@ -8,8 +8,8 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 
+from tests.helpers import NET, edge, every_route, fleet_body
 from tests.service.conftest import DRT
-from tests.service.test_api import NET, edge, fleet_body
 
 
 def assert_problem(r: Any, status: int, needle: str = "") -> None:
@@ -162,18 +162,6 @@ def test_network_upload_round_trip(client: TestClient) -> None:
 def test_oversized_json_body(client: TestClient) -> None:
     big = {"targets": [{"position": {"edge": "x" * 200, "offset": 0.0}}] * 40000}
     assert_problem(client.post("/v1/fleets/f1/targets:batch", json=big), 413)
-
-
-def every_route(routes: Any) -> list[tuple[str, str]]:
-    """(method, path) of every route, looking inside included routers."""
-    out: list[tuple[str, str]] = []
-    for route in routes:
-        inner = getattr(route, "original_router", None)
-        if inner is not None:
-            out += every_route(inner.routes)
-        else:
-            out += [(m, route.path) for m in getattr(route, "methods", None) or ()]
-    return out
 
 
 def test_api_key_guards_every_write_route(db_url: str, make_client: Any) -> None:

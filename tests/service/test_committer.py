@@ -10,11 +10,7 @@ from collections.abc import Callable, Iterator
 import pytest
 
 from routing_svc.service.committer import COMMIT_HANDOFF_WAIT, Committer
-from tests.service.test_loop_futures import (  # run: a fresh loop on a thread of its own
-    blocked_until,
-    handoff_timeouts,
-    run,
-)
+from tests.helpers import blocked_until, handoff_timeouts, run
 
 
 @pytest.fixture

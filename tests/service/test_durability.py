@@ -2,38 +2,15 @@
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable
 from typing import Any
 
 import httpx
-import numpy as np
 
+from tests.helpers import fleet_body, replay_ok, targets
 from tests.service.conftest import LiveServer
-from tests.service.test_api import NET, edge, fleet_body
-
-
-def replay_ok(db_url: str, tmp_path: Any) -> dict[str, Any]:
-    out = subprocess.run(
-        [sys.executable, "-m", "routing_svc.cli", "replay", "--database-url", db_url,
-         "--data-dir", str(tmp_path / "networks")],
-        capture_output=True, text=True, timeout=300,
-    )  # fmt: skip
-    assert out.returncode == 0, out.stdout + out.stderr
-    report: dict[str, Any] = json.loads(out.stdout)
-    return report
-
-
-def targets(seed: int, n: int) -> list[dict[str, Any]]:
-    rng = np.random.default_rng(seed)
-    return [
-        {"position": {"edge": edge(int(e)), "offset": 0.0}}
-        for e in rng.integers(NET.n_edges, size=n)
-    ]
 
 
 def test_concurrent_posts_two_workers(

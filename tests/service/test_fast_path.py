@@ -14,9 +14,8 @@ from pathlib import Path
 
 import numpy as np
 from fastapi.testclient import TestClient
-from prometheus_client import REGISTRY
 
-from tests.service.test_api import NET, edge, fleet_body
+from tests.helpers import NET, edge, fast_answers, fleet_body
 
 Request = tuple[str, bytes, list[tuple[str, str]]]
 
@@ -62,11 +61,6 @@ def _answers(client: TestClient, requests: list[Request]) -> list[tuple[int, str
         r = client.post(path, content=body, headers=sent)
         answers.append((r.status_code, r.headers["content-type"], r.content))
     return answers
-
-
-def fast_answers() -> float:
-    value = REGISTRY.get_sample_value("routing_svc_target_fast_path_total")
-    return 0.0 if value is None else value
 
 
 def test_fast_path_answers_like_the_route(

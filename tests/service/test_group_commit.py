@@ -9,9 +9,8 @@ from typing import Any
 
 import httpx
 
+from tests.helpers import fleet_body, targets
 from tests.service.conftest import LiveServer
-from tests.service.test_api import fleet_body
-from tests.service.test_durability import targets
 
 THREADS = 16
 PER_THREAD = 12

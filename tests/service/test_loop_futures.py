@@ -7,19 +7,15 @@ from __future__ import annotations
 import asyncio
 import threading
 from collections.abc import Callable, Iterator
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any
 
 import pytest
-from prometheus_client import REGISTRY
 
 from routing_svc.service.fleets import Answer, Outcome
 from routing_svc.service.inprocess import InProcessFleetClient
 from routing_svc.service.schemas import TargetSpec
+from tests.helpers import blocked_until, fleet_body, handoff_timeouts, run, targets
 from tests.service.conftest import DRT
-from tests.service.test_api import fleet_body
-from tests.service.test_durability import targets
 
 
 @pytest.fixture
@@ -30,15 +26,6 @@ def client() -> Iterator[InProcessFleetClient]:
         yield opened
 
 
-def blocked_until(release: threading.Event) -> Callable[[], None]:
-    """A commit that waits until ``release`` is set."""
-
-    def commit() -> None:
-        release.wait()
-
-    return commit
-
-
 def specs(seed: int, n: int) -> list[TargetSpec]:
     return [TargetSpec.model_validate(t) for t in targets(seed, n)]
 
@@ -47,32 +34,6 @@ def on_loop(future: Outcome) -> asyncio.Future[Answer]:
     """The future of a request queued from a loop: one of that loop's."""
     assert isinstance(future, asyncio.Future)
     return future
-
-
-def handoff_timeouts() -> float:
-    """Commits whose thread had not started within the loop's bounded hand-over."""
-    value = REGISTRY.get_sample_value("routing_svc_commit_handoff_timeouts_total")
-    assert value is not None
-    return value
-
-
-def run(coroutine: Any) -> Any:
-    """Run ``coroutine`` on a fresh loop in a thread of its own (a test's thread may
-    have a loop running already); fail on anything the loop's exception handler saw."""
-
-    def on_a_fresh_loop() -> Any:
-        loop = asyncio.new_event_loop()
-        seen: list[dict[str, Any]] = []
-        loop.set_exception_handler(lambda _, context: seen.append(context))
-        try:
-            result = loop.run_until_complete(coroutine)
-        finally:
-            loop.close()
-        assert seen == []
-        return result
-
-    with ThreadPoolExecutor(1) as thread:
-        return thread.submit(on_a_fresh_loop).result(timeout=120)
 
 
 def test_answers_come_on_the_loops_own_futures(client: InProcessFleetClient) -> None:

@@ -13,9 +13,8 @@ from pathlib import Path
 
 import httpx
 
+from tests.helpers import fleet_body, targets
 from tests.service.conftest import LiveServer
-from tests.service.test_api import fleet_body
-from tests.service.test_durability import targets
 
 
 def commits(metrics_text: str) -> dict[str, float]:

@@ -16,6 +16,7 @@ from routing_svc.store import (
     NewEvent,
     open_event_log,
 )
+from tests.helpers import one_each, target_event
 
 SHA = "ab" * 32
 
@@ -28,10 +29,6 @@ def log(db_url: str) -> Iterator[EventLog]:
         yield opened
 
 
-def target(n: int) -> NewEvent:
-    return NewEvent("target", f'{{"n": {n}}}', f'{{"moved": {n}}}')
-
-
 def stored_view(item: GroupItem) -> list[tuple[int, str, str, str | None, str | None]]:
     return [(e.seq, e.kind, e.payload_json, e.result_json, e.idempotency_key) for e in item.events]
 
@@ -40,7 +37,7 @@ def test_mixed_group_in_one_transaction(log: EventLog) -> None:
     known = log.append(
         "f",
         expected_version=1,
-        build=lambda m: [target(1), target(2)],
+        build=lambda m: [target_event(1), target_event(2)],
         idempotency_key="old",
         request_hash="h-old",
     )
@@ -51,10 +48,10 @@ def test_mixed_group_in_one_transaction(log: EventLog) -> None:
     ) -> list[list[NewEvent] | RoutingSvcError]:
         calls.append(([e.seq for e in missed], list(fresh)))
         return [
-            [target(10)],  # 0: fresh, keyed
+            [target_event(10)],  # 0: fresh, keyed
             Unreachable("nobody reaches it"),  # 2: fails alone
-            [target(30), target(31)],  # 3: fresh, two events
-            [target(50)],  # 5: fresh, no key
+            [target_event(30), target_event(31)],  # 3: fresh, two events
+            [target_event(50)],  # 5: fresh, no key
         ]
 
     requests: list[tuple[str | None, str | None]] = [
@@ -109,7 +106,7 @@ def test_mixed_group_in_one_transaction(log: EventLog) -> None:
     assert single.duplicate and single.events == items[3].events
     # the failed request's key was not consumed
     later = log.append_group(
-        "f", expected_version=7, requests=[("c", "h-c")], build=lambda m, f: [[target(8)]]
+        "f", expected_version=7, requests=[("c", "h-c")], build=lambda m, f: [[target_event(8)]]
     )
     assert [e.seq for e in later[0].events] == [8] and not later[0].duplicate
 
@@ -125,7 +122,7 @@ def test_snapshot_is_taken_once_at_the_group_version(log: EventLog) -> None:
         "f",
         expected_version=1,
         requests=[(None, None), (None, None)],
-        build=lambda m, f: [[target(1)], [target(2), target(3)]],
+        build=lambda m, f: [[target_event(1)], [target_event(2), target_event(3)]],
         snapshot=snapshot,
     )
     assert seen == [4]
@@ -142,7 +139,7 @@ def test_failing_build_writes_nothing(log: EventLog) -> None:
     with pytest.raises(InvalidInput, match="entries"):
         log.append_group(
             "f", expected_version=1, requests=[("k1", "h"), (None, None)],
-            build=lambda m, f: [[target(1)]],
+            build=lambda m, f: [[target_event(1)]],
         )  # fmt: skip
     bad: list[list[NewEvent]] = [["nope"]]  # type: ignore[list-item]
     with pytest.raises(InvalidInput):
@@ -151,7 +148,7 @@ def test_failing_build_writes_nothing(log: EventLog) -> None:
     assert len(log.events_since("f", 0)) == 1
     # the keys were not consumed
     items = log.append_group(
-        "f", expected_version=1, requests=[("k1", "h")], build=lambda m, f: [[target(1)]]
+        "f", expected_version=1, requests=[("k1", "h")], build=lambda m, f: [[target_event(1)]]
     )
     assert not items[0].duplicate and items[0].version == 2
 
@@ -161,13 +158,9 @@ def test_group_checks_the_cache_version_and_keys(log: EventLog) -> None:
         log.append_group("f", expected_version=5, requests=[(None, None)], build=lambda m, f: [])
     with pytest.raises(InvalidInput):
         log.append_group(
-            "f", expected_version=1, requests=[("", None)], build=lambda m, f: [[target(1)]]
+            "f", expected_version=1, requests=[("", None)], build=lambda m, f: [[target_event(1)]]
         )
     assert log.get_fleet("f").version == 1
-
-
-def one_each(missed: list[EventRecord], fresh: list[int]) -> list[list[NewEvent] | RoutingSvcError]:
-    return [[target(i)] for i in fresh]
 
 
 def test_groups_of_several_fleets_commit_together(log: EventLog) -> None:

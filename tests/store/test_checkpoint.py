@@ -41,11 +41,12 @@ def test_commits_do_not_checkpoint_and_the_thread_does(tmp_path: Path) -> None:
         fill(log, "a", 200)  # 2,000 events of 2 kB: past SQLite's automatic 1000 pages
         assert path.stat().st_size == before  # every commit left its pages in the log
         assert Path(f"{path}-wal").stat().st_size > 4_000_000
-        log._checkpointer = WalCheckpointer(str(path), interval=0.05).start()
+        restarted = WalCheckpointer(str(path), interval=0.05).start()
+        log._checkpointer = restarted
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline and path.stat().st_size < before + 4_000_000:
             time.sleep(0.05)
         assert path.stat().st_size > before + 4_000_000  # copied by the thread
-        assert log._checkpointer.checkpoints >= 1
+        assert restarted.checkpoints >= 1
         assert [e.seq for e in log.events("a", after=2000, limit=10)] == [2001]
         assert log.integrity_check() == []

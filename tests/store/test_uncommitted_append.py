@@ -12,7 +12,7 @@ import pytest
 
 from routing_svc.errors import RoutingSvcError, UnknownFleet
 from routing_svc.store import EventLog, FleetGroup
-from tests.store.test_append_group import one_each
+from tests.helpers import one_each
 
 
 @pytest.fixture

@@ -11,6 +11,7 @@ from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from routing_svc.service.deps import fleet_service
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.problems import retry_after_of
+from routing_svc.service.responses import RETRY_AFTER, Health, problems
 from routing_svc.service.store_health import StoreHealth
 
 router = APIRouter(tags=["health"])
@@ -19,12 +20,18 @@ HEALTH_RESPONSES: dict[int | str, dict[str, Any]] = {
     200: {"description": "The store can take writes now."},
     503: {
         "description": "Writes would fail now (`reason` says why); `Retry-After` is set.",
-        "content": {"application/json": {"schema": {"type": "object"}}},
+        "model": Health,
+        "headers": RETRY_AFTER,
+        # ... or a problem, when the request's deadline passed first
+        "content": problems(503)[503]["content"],
     },
 }
+HEALTH_RESPONSES |= problems(500)
 
 
-@router.get("/healthz", responses=HEALTH_RESPONSES, response_class=JSONResponse)
+@router.get(
+    "/healthz", response_model=Health, responses=HEALTH_RESPONSES, response_class=JSONResponse
+)
 async def healthz(
     request: Request, service: Annotated[FleetService, Depends(fleet_service)]
 ) -> JSONResponse:

@@ -5,22 +5,45 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Query, Request, Response
+from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
 from routing_svc.errors import Conflict, PayloadTooLarge
 from routing_svc.service.deps import fleet_service, network_registry
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.networks import NetworkRegistry
+from routing_svc.service.responses import (
+    CONFLICT,
+    FOUND,
+    READ,
+    WRITE,
+    Geometry,
+    NetworkAnswer,
+    NetworkList,
+)
 from routing_svc.service.schemas import Identifier
 
-router = APIRouter(prefix="/v1/networks", tags=["networks"])
+router = APIRouter(
+    prefix="/v1/networks",
+    tags=["networks"],
+    default_response_class=JSONResponse,  # json.dumps, as the answers always were written
+    responses=READ,
+)
 
+NET_FILE = {"type": "string", "format": "binary"}
 NET_BODY = {
     "requestBody": {
         "required": True,
+        "description": "A SUMO road network (`.net.xml`) or an OpenStreetMap extract "
+        "(root `<osm>`, converted as `routing-svc import-osm` does), plain or "
+        "gzip-compressed, at most `max_network_bytes` (setting "
+        "`ROUTING_SVC_MAX_NETWORK_BYTES`) as sent. The service checks what JSON Schema "
+        "cannot: well-formed XML inside the service's XML limits, a SUMO `<net>` (or an "
+        "extract netconvert builds one from) with usable edges for passenger cars. Anything "
+        "else is a 422 (`invalid-network`, `xml-limit-exceeded`); a larger body is a 413.",
         "content": {
-            "application/xml": {"schema": {"type": "string", "format": "binary"}},
-            "application/gzip": {"schema": {"type": "string", "format": "binary"}},
+            "application/xml": {"schema": NET_FILE},
+            "application/gzip": {"schema": NET_FILE},
         },
     }
 }
@@ -49,12 +72,25 @@ async def read_limited(request: Request, limit: int) -> bytearray:
     return data
 
 
-UPLOAD_RESPONSES: dict[int | str, dict[str, Any]] = {
-    200: {"description": "The network is already known under this id with the same content."},
-}
+UPLOAD_RESPONSES: dict[int | str, dict[str, Any]] = (
+    {
+        200: {
+            "description": "The network is already known under this id with the same content.",
+            "model": NetworkAnswer,
+        },
+    }
+    | WRITE
+    | CONFLICT
+)
 
 
-@router.post("", status_code=201, responses=UPLOAD_RESPONSES, openapi_extra=NET_BODY)
+@router.post(
+    "",
+    status_code=201,
+    response_model=NetworkAnswer,
+    responses=UPLOAD_RESPONSES,
+    openapi_extra=NET_BODY,
+)
 async def upload_network(
     request: Request,
     response: Response,
@@ -62,7 +98,13 @@ async def upload_network(
     service: Annotated[FleetService, Depends(fleet_service)],
     name: Annotated[Identifier | None, Query()] = None,
 ) -> dict[str, Any]:
-    """Upload a SUMO ``.net.xml`` or ``.net.xml.gz``; it is checked, compiled and kept.
+    """Upload a SUMO ``.net.xml`` or ``.net.xml.gz``, or an OpenStreetMap extract
+    (``.osm``, ``.osm.xml``, plain or gzip); it is checked, compiled and kept.
+
+    An upload whose root element is ``<osm>`` is converted with SUMO's
+    netconvert and SUMO's recommended OpenStreetMap options (as
+    ``routing-svc import-osm``), under the same size and XML limits; the answer
+    is then the same as for the network it became.
 
     A network is identified by the SHA-256 of its plain XML, whether it was
     named at start-up or uploaded, gzipped or not. The same content under a
@@ -87,7 +129,7 @@ async def upload_network(
     return await run_in_threadpool(register)
 
 
-@router.get("")
+@router.get("", response_model=NetworkList)
 async def list_networks(
     registry: Annotated[NetworkRegistry, Depends(network_registry)],
 ) -> dict[str, Any]:
@@ -95,7 +137,7 @@ async def list_networks(
     return {"items": [e.summary() for e in registry.all()]}
 
 
-@router.get("/{network_id}")
+@router.get("/{network_id}", response_model=NetworkAnswer, responses=FOUND)
 async def get_network(
     network_id: str, service: Annotated[FleetService, Depends(fleet_service)]
 ) -> dict[str, Any]:
@@ -104,7 +146,7 @@ async def get_network(
     return entry.summary()
 
 
-@router.get("/{network_id}/geometry")
+@router.get("/{network_id}/geometry", response_model=Geometry, responses=FOUND)
 async def get_geometry(
     network_id: str, service: Annotated[FleetService, Depends(fleet_service)]
 ) -> dict[str, Any]:

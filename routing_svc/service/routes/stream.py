@@ -48,6 +48,7 @@ from routing_svc.errors import InvalidInput, RoutingSvcError, UnknownFleet
 from routing_svc.service.deps import fleet_service
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.problems import error_document
+from routing_svc.service.responses import FOUND, INVALID, READ
 from routing_svc.store import EventRecord
 
 POLL_SECONDS = 0.25
@@ -64,17 +65,53 @@ RETRY_MS = 1000
 """How long ``EventSource`` waits before reconnecting."""
 MAX_SEQ = 2**62
 
+
+def decimal_at_most(limit: int) -> str:
+    """A regular expression of the decimal numbers from 0 to ``limit``, leading zeros
+    allowed up to the length of ``limit``, or nothing: ``Last-Event-ID``'s values in
+    the OpenAPI document (:func:`resume_point` reads them)."""
+    text = str(limit)
+    same_length = [
+        f"{text[:i]}[0-{int(digit) - 1}][0-9]{{{len(text) - i - 1}}}"
+        for i, digit in enumerate(text)
+        if digit != "0"
+    ]
+    shorter = f"[0-9]{{1,{len(text) - 1}}}"
+    return "^(|" + "|".join([shorter, *same_length, text]) + ")$"
+
+
+LAST_EVENT_ID = decimal_at_most(MAX_SEQ)
+
 STREAMS_OPEN = Gauge("routing_svc_sse_streams", "Server-Sent Events streams open in this process")
 
 router = APIRouter(prefix="/v1/fleets/{fleet_id}", tags=["stream"])
 Service = Annotated[FleetService, Depends(fleet_service)]
 
-STREAM_RESPONSE: dict[int | str, dict[str, Any]] = {
-    200: {
-        "description": "Server-Sent Events: `log` (one per stored event), `metrics`, `problem`.",
-        "content": {"text/event-stream": {"schema": {"type": "string"}}},
+STREAM_RESPONSE: dict[int | str, dict[str, Any]] = (
+    {
+        200: {
+            "description": "Server-Sent Events: `log` (one per stored event), `metrics`, "
+            "`problem`.",
+            "content": {
+                "text/event-stream": {
+                    "schema": {
+                        "type": "object",
+                        "description": "One message of the stream.",
+                        "properties": {
+                            "event": {"enum": ["log", "metrics", "problem"]},
+                            "data": {"type": "string", "description": "One line of JSON."},
+                            "id": {"type": "string", "description": "The event's `seq` (`log`)."},
+                            "retry": {"type": "integer", "minimum": 0},
+                        },
+                    }
+                }
+            },
+        }
     }
-}
+    | READ
+    | FOUND
+    | INVALID
+)
 
 
 def sse_message(*, data: str, event: str | None = None, event_id: int | None = None) -> str:
@@ -205,7 +242,7 @@ async def stream_fleet(
     request: Request,
     service: Service,
     after: Annotated[int | None, Query(ge=0, le=MAX_SEQ)] = None,
-    last_event_id: Annotated[str | None, Header(max_length=32)] = None,
+    last_event_id: Annotated[str | None, Header(max_length=32, pattern=LAST_EVENT_ID)] = None,
 ) -> StreamingResponse:
     """Live events and metrics of a fleet as Server-Sent Events (see the module docstring)."""
     start = resume_point(after, last_event_id)

@@ -8,6 +8,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Header, Request, Response
 from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
 from prometheus_client import Counter
 from pydantic import ValidationError
 from starlette.concurrency import run_in_threadpool
@@ -15,9 +16,24 @@ from starlette.concurrency import run_in_threadpool
 from routing_svc.service.deadline import request_deadline
 from routing_svc.service.deps import fleet_service
 from routing_svc.service.fleets import FleetService, Outcome
+from routing_svc.service.responses import (
+    CONFLICT,
+    FOUND,
+    READ,
+    WRITE,
+    Assignment,
+    TargetBatchResult,
+    TargetResult,
+    TravelTimesResult,
+)
 from routing_svc.service.schemas import TargetBatch, TargetSpec, TravelTimes
 
-router = APIRouter(prefix="/v1/fleets/{fleet_id}", tags=["targets"])
+router = APIRouter(
+    prefix="/v1/fleets/{fleet_id}",
+    tags=["targets"],
+    default_response_class=JSONResponse,  # json.dumps, as the answers always were written
+    responses=READ,
+)
 Service = Annotated[FleetService, Depends(fleet_service)]
 IdempotencyKey = Annotated[str | None, Header(min_length=1, max_length=200)]
 
@@ -26,12 +42,30 @@ TARGET_SPEC_REF = "#/components/schemas/TargetSpec"
 
 TARGETS_APPLIED = Counter("routing_svc_targets_total", "Targets applied (acknowledged)")
 
-TARGET_RESPONSE: dict[int | str, dict[str, Any]] = {
-    200: {
-        "description": "The target was served and the last-arriving vehicle moved.",
-        "content": {"application/json": {"schema": {"type": "object"}}},
+TARGET_RESPONSE: dict[int | str, dict[str, Any]] = (
+    {
+        200: {
+            "description": "The target was served and the last-arriving vehicle moved.",
+            "model": TargetResult,
+        }
     }
-}
+    | WRITE
+    | FOUND
+    | CONFLICT
+)
+"""The answers of the single-target route (the fast path's too, see ``fastpath.py``)."""
+
+BATCH_RESPONSE: dict[int | str, dict[str, Any]] = (
+    {
+        200: {
+            "description": "The targets were served in order, in one transaction.",
+            "model": TargetBatchResult,
+        }
+    }
+    | WRITE
+    | FOUND
+    | CONFLICT
+)
 
 
 Submit = Callable[[asyncio.AbstractEventLoop | None], Outcome]
@@ -110,7 +144,7 @@ async def post_target(
     return Response(results[0], media_type="application/json")
 
 
-@router.post("/targets:batch", responses=TARGET_RESPONSE, response_class=Response)
+@router.post("/targets:batch", responses=BATCH_RESPONSE, response_class=Response)
 async def post_target_batch(
     fleet_id: str,
     batch: TargetBatch,
@@ -131,13 +165,13 @@ async def post_target_batch(
     return Response(answer, media_type="application/json")
 
 
-@router.post("/assign")
+@router.post("/assign", response_model=Assignment, responses=WRITE | FOUND)
 async def assign(fleet_id: str, target: TargetSpec, service: Service) -> dict[str, Any]:
     """Who would serve this target; changes nothing."""
     return await run_in_threadpool(service.assign, fleet_id, target)
 
 
-@router.put("/traveltimes")
+@router.put("/traveltimes", response_model=TravelTimesResult, responses=WRITE | FOUND | CONFLICT)
 async def put_travel_times(fleet_id: str, body: TravelTimes, service: Service) -> dict[str, Any]:
     """Replace per-edge travel times (seconds) of a ``cost = time`` fleet; recorded as an
     event so that replay stays exact."""

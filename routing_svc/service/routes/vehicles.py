@@ -15,12 +15,11 @@ from starlette.concurrency import run_in_threadpool
 
 from routing_svc.service.deps import fleet_service
 from routing_svc.service.fleets import FleetService
-from routing_svc.service.problems import PROBLEM
+from routing_svc.service.responses import CONFLICT, FOUND, WRITE, VehicleStateResult
 from routing_svc.service.schemas import (
     Identifier,
     VehicleStateBatch,
     VehicleStateChange,
-    VehicleStateResult,
     VehicleStateSpec,
 )
 
@@ -29,31 +28,10 @@ Service = Annotated[FleetService, Depends(fleet_service)]
 IdempotencyKey = Annotated[str | None, Header(min_length=1, max_length=200)]
 
 
-PROBLEM_SCHEMA: dict[str, Any] = {
-    "type": "object",
-    "properties": {
-        "type": {"type": "string"},
-        "title": {"type": "string"},
-        "status": {"type": "integer"},
-        "detail": {"type": "string"},
-    },
-    "required": ["type", "title", "status", "detail"],
-}
-"""An RFC 9457 problem document (``application/problem+json``)."""
-
-
-def _problem(description: str) -> dict[str, Any]:
-    return {"description": description, "content": {PROBLEM: {"schema": PROBLEM_SCHEMA}}}
-
-
-STATE_ERRORS: dict[int | str, dict[str, Any]] = {
-    404: _problem("Unknown fleet, vehicle or edge."),
-    409: _problem(
-        "A timestamp before the vehicle's last one, a deleted fleet, or an "
-        "Idempotency-Key reused with another body."
-    ),
-    422: _problem("Invalid body: a status not one of the three, a position off the network."),
-}
+STATE_ERRORS = WRITE | FOUND | CONFLICT
+"""Unknown fleet, vehicle or edge (404); a timestamp before the vehicle's last one, a deleted
+fleet or an ``Idempotency-Key`` reused with another body (409); a status not one of the
+three or a position off the network (422)."""
 
 
 async def _apply(

@@ -1,0 +1,173 @@
+"""Checking a history's places and required types before anything is sent.
+
+Every place is resolved to an ``(edge, offset)`` position by the code the
+service resolves targets with, and the position is what is sent, so the fleet
+learns exactly from the checked positions:
+
+- in process (:func:`place_locally`): the network's own
+  :class:`~routing_svc.service.networks.NetworkEntry` (the same snapper, the
+  same ``SNAP_DISTANCE_M``, vectorised over the whole file) and the fleet's
+  vehicle types (:func:`~routing_svc.sa.requirements.build_requirement`, which
+  the fleet uses for every target);
+- against a server (:func:`place_remotely`): ``POST /v1/fleets/{id}/assign``
+  for each distinct place and requirement, which resolves the place, checks the
+  types and changes nothing; its answer gives the position.
+
+A row fails when its place is off the map (farther than ``SNAP_DISTANCE_M`` from
+every usable edge, or an edge the network does not use, an offset past the
+edge's end) or when the fleet cannot serve its required types.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from pydantic import ValidationError
+from tqdm import tqdm
+
+from routing_svc.client import FleetClient
+from routing_svc.errors import InvalidInput, NotFound, OffNetwork, RoutingSvcError
+from routing_svc.history.calls import BadRow, CallTable
+from routing_svc.sa.requirements import build_requirement
+from routing_svc.service.networks import SNAP_DISTANCE_M, NetworkEntry
+from routing_svc.service.schemas import EdgePosition
+from routing_svc.types import NetPosition
+
+SNAP_BLOCK = 65_536
+"""Points snapped per vectorised call."""
+
+
+@dataclass
+class PlacedCalls:
+    """The rows that can be sent, with their positions, and the rows that cannot.
+
+    ``rows`` index the :class:`CallTable`; ``edges[i], offsets[i]`` is row
+    ``rows[i]``'s position; ``bad`` holds the table's unreadable rows too, by line.
+    """
+
+    rows: npt.NDArray[np.int64]
+    edges: list[str]
+    offsets: list[float]
+    bad: list[BadRow]
+
+
+Snap = Callable[..., list[NetPosition]]
+
+
+def _snap_all(
+    snap: Snap, a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]
+) -> tuple[list[NetPosition | None], dict[int, str]]:
+    """Snap every point; the points off the network are found by halving the blocks
+    that fail (the snapper refuses a whole block for one such point)."""
+    out: list[NetPosition | None] = [None] * a.shape[0]
+    failed: dict[int, str] = {}
+    stack = [(lo, min(lo + SNAP_BLOCK, a.shape[0])) for lo in range(0, a.shape[0], SNAP_BLOCK)]
+    while stack:
+        lo, hi = stack.pop()
+        try:
+            out[lo:hi] = snap(a[lo:hi], b[lo:hi], max_distance=SNAP_DISTANCE_M)
+        except OffNetwork:
+            if hi - lo == 1:
+                failed[lo] = f"farther than {SNAP_DISTANCE_M:g} m from every usable edge"
+            else:
+                mid = (lo + hi) // 2
+                stack += [(mid, hi), (lo, mid)]
+    return out, failed
+
+
+def _requirement_errors(
+    requires: Sequence[tuple[str, ...] | None], vehicle_types: Sequence[str] | None
+) -> dict[tuple[str, ...], str]:
+    """The distinct requirements the fleet cannot serve, with the reason."""
+    if vehicle_types is None:
+        return {}
+    errors: dict[tuple[str, ...], str] = {}
+    for needs in {r for r in requires if r is not None}:
+        try:
+            build_requirement(vehicle_types, needs)
+        except RoutingSvcError as exc:
+            errors[needs] = exc.detail
+    return errors
+
+
+def place_locally(
+    table: CallTable, entry: NetworkEntry, *, vehicle_types: Sequence[str] | None
+) -> PlacedCalls:
+    """Resolve every row on ``entry``; ``vehicle_types=None`` skips the type check."""
+    bad = list(table.bad)
+    reasons: dict[int, str] = {}
+    positions: list[NetPosition | None]
+    if table.form == "edge":
+        positions = []
+        for row, (edge, offset) in enumerate(zip(table.edges, table.second.tolist(), strict=True)):
+            try:
+                positions.append(entry.resolve(EdgePosition(edge=edge, offset=offset)))
+            except ValidationError as exc:
+                positions.append(None)
+                reasons[row] = str(exc.errors()[0].get("msg"))
+            except RoutingSvcError as exc:
+                positions.append(None)
+                reasons[row] = exc.detail
+    else:
+        if table.form == "lonlat":
+            projection = entry.network.projection
+            if projection is None or not projection.supported:
+                raise InvalidInput(
+                    f"network {entry.id!r} has no geographic projection: give x,y or edge places"
+                )
+            snap: Snap = entry.snapper.snap_lonlat
+        else:
+            snap = entry.snapper.snap_xy
+        positions, reasons = _snap_all(snap, table.first, table.second)
+    unmet = _requirement_errors(table.requires, vehicle_types)
+    rows: list[int] = []
+    edges: list[str] = []
+    offsets: list[float] = []
+    edge_ids = entry.network.edge_ids
+    for row, position in enumerate(positions):
+        needs = table.requires[row]
+        reason = reasons.get(row) or (unmet.get(needs) if needs is not None else None)
+        if reason is not None or position is None:
+            bad.append(BadRow(int(table.lines[row]), reason or "no position"))
+            continue
+        rows.append(row)
+        edges.append(edge_ids[position.edge])
+        offsets.append(position.offset)
+    bad.sort(key=lambda r: r.line)
+    return PlacedCalls(np.asarray(rows, dtype=np.int64), edges, offsets, bad)
+
+
+def place_remotely(
+    table: CallTable, client: FleetClient, fleet_id: str, *, progress: bool = True
+) -> PlacedCalls:
+    """Resolve every row with the server's ``/assign`` (once per distinct place and
+    requirement); the fleet must exist (a 4xx answer then means a bad row)."""
+    client.get_fleet(fleet_id)
+    bad = list(table.bad)
+    answers: dict[tuple[object, ...], tuple[str, float] | str] = {}
+    rows: list[int] = []
+    edges: list[str] = []
+    offsets: list[float] = []
+    for row in tqdm(range(len(table)), disable=not progress, file=sys.stderr, unit="call"):
+        place = table.place(row)
+        needs = table.requires[row]
+        key = (*place.values(), needs)
+        if key not in answers:
+            try:
+                answer = client.assign(fleet_id, place, requires=needs)
+                answers[key] = (str(answer["target"]["edge"]), float(answer["target"]["offset"]))
+            except (InvalidInput, NotFound) as exc:  # the fleet exists: the row is bad
+                answers[key] = exc.detail
+        found = answers[key]
+        if isinstance(found, str):
+            bad.append(BadRow(int(table.lines[row]), found))
+            continue
+        rows.append(row)
+        edges.append(found[0])
+        offsets.append(found[1])
+    bad.sort(key=lambda r: r.line)
+    return PlacedCalls(np.asarray(rows, dtype=np.int64), edges, offsets, bad)

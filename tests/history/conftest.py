@@ -1,0 +1,122 @@
+"""Fixtures of the history tests: the DRT district (it has a geographic projection),
+calls written by the tests themselves, an in-process client, a live server."""
+
+from __future__ import annotations
+
+import csv
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+
+from routing_svc.history import InProcessHistoryClient
+from routing_svc.nets import resolve_network
+from routing_svc.network import CompiledNetwork, load_network
+from routing_svc.network.snapping import point_on_edge
+
+DRT = resolve_network("drt")
+
+
+@pytest.fixture(scope="session")
+def drt() -> CompiledNetwork:
+    return load_network(DRT)
+
+
+def random_calls(net: CompiledNetwork, n: int, *, seed: int) -> list[dict[str, Any]]:
+    """``n`` calls at random positions: time (seconds), edge, offset, x, y, lon, lat."""
+    rng = np.random.default_rng(seed)
+    calls = []
+    for i in range(n):
+        e = int(rng.integers(net.n_edges))
+        offset = round(float(rng.uniform(0.0, net.length[e])), 2)
+        x, y = point_on_edge(net, e, offset)
+        assert net.projection is not None
+        lon, lat = net.projection.point_to_lonlat(x, y)
+        calls.append(
+            {"time": float(rng.uniform(0, 86_400)), "edge": net.edge_ids[e], "offset": offset,
+             "x": x, "y": y, "lon": lon, "lat": lat, "i": i}
+        )  # fmt: skip
+    return calls
+
+
+def write_csv(path: Path, header: Sequence[str], rows: Sequence[Sequence[object]]) -> Path:
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(header)
+        writer.writerows(rows)
+    return path
+
+
+@pytest.fixture
+def client(tmp_path: Path) -> Iterator[InProcessHistoryClient]:
+    """An in-process client on a fresh SQLite event log, with the DRT network."""
+    c = InProcessHistoryClient(database_url=f"sqlite:///{tmp_path / 'events.db'}")
+    c.add_network(DRT, name="drt")
+    yield c
+    c.close()
+
+
+def fleet_at(
+    edges: Sequence[tuple[str, float]], *, fleet_id: str = "f", rule: str = "paper"
+) -> dict[str, Any]:
+    """A fleet spec on ``drt`` with one vehicle at each ``(edge, offset)``."""
+    return {
+        "id": fleet_id,
+        "network": "drt",
+        "rule": rule,
+        "vehicles": [
+            {"id": f"v{i}", "position": {"edge": e, "offset": o}} for i, (e, o) in enumerate(edges)
+        ],
+    }
+
+
+def cli(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "routing_svc.cli", *args],
+        capture_output=True, text=True, timeout=600, env={**os.environ, **(env or {})},
+    )  # fmt: skip
+
+
+@pytest.fixture
+def live_server(tmp_path: Path) -> Iterator[Callable[[], str]]:
+    """``start()`` runs ``routing-svc serve`` (uvicorn) on a fresh SQLite file; its URL."""
+    processes: list[subprocess.Popen[bytes]] = []
+
+    def start() -> str:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        url = f"http://127.0.0.1:{port}"
+        cmd = [
+            sys.executable, "-m", "routing_svc.cli", "serve", "--port", str(port),
+            "--net", f"drt={DRT}", "--no-demo", "--db", str(tmp_path / "server.db"),
+            "--data-dir", str(tmp_path / "networks"), "--log-level", "warning",
+        ]  # fmt: skip
+        with (tmp_path / "server.log").open("ab") as log:
+            process = subprocess.Popen(
+                cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+            )
+        processes.append(process)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            assert process.poll() is None, (tmp_path / "server.log").read_text()
+            try:
+                if httpx.get(url + "/healthz", timeout=1.0).status_code == 200:
+                    return url
+            except httpx.HTTPError:
+                pass
+            time.sleep(0.1)
+        raise RuntimeError("the server did not start")
+
+    yield start
+    for process in processes:
+        process.terminate()
+        process.wait(timeout=30)

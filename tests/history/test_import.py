@@ -1,0 +1,176 @@
+"""Importing a history in process: the place forms, time order, bad rows, idempotency."""
+
+from __future__ import annotations
+
+import json
+import math
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+import pytest
+
+from routing_svc.history import (
+    HistoryRefused,
+    InProcessHistoryClient,
+    place_locally,
+    read_calls,
+    replay_history,
+)
+from routing_svc.history.replay import chunk_key
+from routing_svc.network import CompiledNetwork
+from routing_svc.network.snapping import point_on_edge
+from tests.history.conftest import cli, fleet_at, random_calls, write_csv
+
+
+def _import(client: InProcessHistoryClient, path: Path, fleet: str, **options: object):  # type: ignore[no-untyped-def]
+    table = read_calls(path)
+    runtime = client.get_fleet(fleet)
+    entry = client.service.network("drt")
+    placed = place_locally(table, entry, vehicle_types=[v["type"] for v in runtime["vehicles"]])
+    return replay_history(table, placed, client, fleet, progress=False, **options)  # type: ignore[arg-type]
+
+
+def _event_targets(client: InProcessHistoryClient, fleet: str) -> list[tuple[str, float]]:
+    events = client.service.events(fleet, after=1, limit=100_000)
+    return [(e["payload"]["target"]["edge"], e["payload"]["target"]["offset"]) for e in events]
+
+
+def test_lonlat_xy_and_edge_places_land_where_the_calls_are(
+    tmp_path: Path, client: InProcessHistoryClient, drt: CompiledNetwork
+) -> None:
+    calls = random_calls(drt, 60, seed=1)
+    forms = {
+        "lonlat": (["time", "lon", "lat"], [[c["time"], c["lon"], c["lat"]] for c in calls]),
+        "xy": (["Time", "X", "Y"], [[c["time"], c["x"], c["y"]] for c in calls]),
+        "edge": (["time", "edge", "offset"], [[c["time"], c["edge"], c["offset"]] for c in calls]),
+    }
+    for name, (header, rows) in forms.items():
+        table = read_calls(write_csv(tmp_path / f"{name}.csv", header, rows))
+        placed = place_locally(table, client.service.network("drt"), vehicle_types=["default"])
+        assert not placed.bad and len(placed.edges) == 60
+        for c, edge, offset in zip(calls, placed.edges, placed.offsets, strict=True):
+            if name == "edge":
+                assert (edge, offset) == (c["edge"], c["offset"])
+            else:  # the snapped position is where the call is (to rounding of lon/lat)
+                x, y = point_on_edge(drt, drt.edge_index[edge], offset)
+                assert math.hypot(x - c["x"], y - c["y"]) < 0.01
+    client.create_fleet(fleet_at([(calls[0]["edge"], 0.0), (calls[1]["edge"], 0.0)]))
+    result = _import(client, tmp_path / "lonlat.csv", "f", chunk_size=25)
+    assert (result.sent, result.applied, result.chunks) == (60, 60, 3)
+    assert client.get_fleet("f")["version"] == 61
+
+
+def test_an_unsorted_file_is_replayed_in_time_order(
+    tmp_path: Path, client: InProcessHistoryClient, drt: CompiledNetwork
+) -> None:
+    calls = random_calls(drt, 40, seed=2)  # random times, in file order
+    start = datetime(2024, 3, 1, tzinfo=UTC)
+    iso = [(start + timedelta(seconds=int(c["time"]))).isoformat() for c in calls]
+    path = write_csv(
+        tmp_path / "calls.csv",
+        ["time", "edge", "offset"],
+        [[t, c["edge"], c["offset"]] for t, c in zip(iso, calls, strict=True)],
+    )
+    client.create_fleet(fleet_at([(calls[0]["edge"], 0.0)]))
+    _import(client, path, "f", chunk_size=7)
+    expected = [
+        (c["edge"], c["offset"])
+        for _, c in sorted(zip(iso, calls, strict=True), key=lambda p: p[0])
+    ]
+    assert expected != [(c["edge"], c["offset"]) for c in calls]
+    assert _event_targets(client, "f") == expected
+
+
+def _file_with_bad_rows(tmp_path: Path, drt: CompiledNetwork) -> Path:
+    calls = random_calls(drt, 10, seed=3)
+    rows: list[list[object]] = [[c["time"], c["lon"], c["lat"], ""] for c in calls]
+    rows[1][0] = "yesterday"  # line 3: no time
+    rows[3][1:3] = [0.0, 0.0]  # line 5: far off the map
+    rows[5][3] = "Z"  # line 7: a type the fleet lacks
+    rows[7][2] = "north"  # line 9: not a number
+    return write_csv(tmp_path / "bad.csv", ["time", "lon", "lat", "types"], rows)
+
+
+def test_refuse_imports_nothing_and_names_the_lines(
+    tmp_path: Path, client: InProcessHistoryClient, drt: CompiledNetwork
+) -> None:
+    path = _file_with_bad_rows(tmp_path, drt)
+    client.create_fleet(fleet_at([(drt.edge_ids[0], 0.0)]))
+    before = client.get_fleet("f")
+    with pytest.raises(HistoryRefused) as refused:
+        _import(client, path, "f")
+    assert [r.line for r in refused.value.bad] == [3, 5, 7, 9]
+    assert client.get_fleet("f") == before
+    skipped = _import(client, path, "f", on_bad_row="skip")
+    assert [r.line for r in skipped.bad] == [3, 5, 7, 9]
+    assert (skipped.sent, skipped.applied) == (6, 6)
+    assert client.get_fleet("f")["version"] == before["version"] + 6
+
+
+def test_refuse_on_the_command_line_exits_2_with_the_lines(
+    tmp_path: Path, drt: CompiledNetwork
+) -> None:
+    path = _file_with_bad_rows(tmp_path, drt)
+    db = str(tmp_path / "cli.db")
+    created = cli(
+        "history",
+        "create-fleet",
+        str(path),
+        "--fleet",
+        "f",
+        "--net",
+        "drt=drt",
+        "--vehicles",
+        "2",
+        "--db",
+        db,
+        "--on-bad-row",
+        "skip",
+    )
+    assert created.returncode == 0, created.stderr
+    assert [r["line"] for r in json.loads(created.stdout)["bad_rows"]] == [3, 5, 9]
+    out = cli("history", "import", str(path), "--fleet", "f", "--db", db, "--quiet")
+    assert out.returncode == 2
+    assert all(f"line {n}:" in out.stderr for n in (3, 5, 7, 9))
+    again = cli(
+        "history",
+        "import",
+        str(path),
+        "--fleet",
+        "f",
+        "--db",
+        db,
+        "--quiet",
+        "--on-bad-row",
+        "skip",
+    )
+    assert again.returncode == 0, again.stderr
+    summary = json.loads(again.stdout)
+    assert summary["version_before"] == 1 and summary["version_after"] == 7
+
+
+def test_a_rerun_after_a_crash_applies_each_chunk_once(
+    tmp_path: Path, client: InProcessHistoryClient, drt: CompiledNetwork
+) -> None:
+    calls = random_calls(drt, 50, seed=4)
+    path = write_csv(
+        tmp_path / "calls.csv",
+        ["time", "edge", "offset"],
+        [[c["time"], c["edge"], c["offset"]] for c in calls],
+    )
+    client.create_fleet(fleet_at([(calls[0]["edge"], 0.0), (calls[1]["edge"], 0.0)]))
+    # the first chunk went through before the crash
+    table = read_calls(path)
+    first = sorted(calls, key=lambda c: c["time"])[:20]
+    client.post_batch(
+        "f",
+        [{"position": {"edge": c["edge"], "offset": c["offset"]}} for c in first],
+        idempotency_key=chunk_key(table.sha256, 20, 0),
+    )
+    resumed = _import(client, path, "f", chunk_size=20)
+    assert (resumed.applied, resumed.applied_chunks, resumed.version_after) == (30, 2, 51)
+    state = client.get_fleet("f")
+    again = _import(client, path, "f", chunk_size=20)
+    assert (again.applied, again.version_after) == (0, 51)
+    assert client.get_fleet("f") == state
+    assert list(again.costs) == list(resumed.costs)  # the stored answers
