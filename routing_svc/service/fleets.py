@@ -257,6 +257,7 @@ class FleetService:
         self._loop_queue: deque[_Pending] = deque()
         self._loop_drain: asyncio.Task[None] | None = None
         self._committer: Committer | None = None
+        self._levels_seen: dict[str, dict[str, Any]] = {}
 
     # -- plumbing ---------------------------------------------------------------
 
@@ -663,13 +664,26 @@ class FleetService:
             return self._runtime(fleet_id).metrics()
 
     def cached_service_levels(self) -> list[tuple[str, dict[str, Any]]]:
-        """``(fleet id, service levels)`` of every fleet in memory (no database read)."""
+        """``(fleet id, service levels)`` of every fleet in memory (no database read).
+
+        A fleet's lock is only tried, never waited for: the event loop may hold it
+        across an ``await`` (:meth:`_commit_on_loop`), and a scrape runs on that loop.
+        A fleet whose lock is taken reports what it reported last.
+        """
         out = []
         for fleet_id in sorted(self._cache):
-            with self._locked(fleet_id):
-                runtime = self._cache.get(fleet_id)
-                if runtime is not None and not runtime.deleted:
-                    out.append((fleet_id, runtime.levels.report()))
+            lock = self._lock_of(fleet_id)
+            if lock.acquire(blocking=False):
+                try:
+                    runtime = self._cache.get(fleet_id)
+                    if runtime is None or runtime.deleted:
+                        self._levels_seen.pop(fleet_id, None)
+                    else:
+                        self._levels_seen[fleet_id] = runtime.levels.report()
+                finally:
+                    lock.release()
+            if fleet_id in self._levels_seen:
+                out.append((fleet_id, self._levels_seen[fleet_id]))
         return out
 
     def events(self, fleet_id: str, *, after: int, limit: int) -> list[dict[str, Any]]:
