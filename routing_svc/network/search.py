@@ -440,6 +440,7 @@ def nearest_vehicles(
     probe_offset: FloatArray | None = None,
     probe_speed: FloatArray | None = None,
     probe_time: FloatArray | None = None,
+    mover_groups: int = -1,
 ) -> tuple[int, int, int, npt.NDArray[np.int64], FloatArray, FloatArray, Int32Array]:
     """Find the ``counts[g]`` fastest vehicles of every group ``g`` for one target.
 
@@ -466,6 +467,9 @@ def nearest_vehicles(
     arrive before it: the best lists then hold what was found (``inf`` and
     ``-1`` in slots left empty, a found vehicle may also arrive later than
     the cutoff), the status is ``STATUS_OK`` and there is no mover or route.
+
+    ``mover_groups >= 0`` chooses the mover among the slots of groups
+    ``0 .. mover_groups - 1`` only (``0``: no mover, no route); ``-1``: every group.
 
     With ``probe_*`` columns (laid out like the vehicles', ``probe_time`` one
     entry per vehicle, speeds no faster than the fastest vehicle's, and one
@@ -599,9 +603,10 @@ def nearest_vehicles(
             break
     mover_slot = -1
     route = np.empty(0, dtype=np.int64)
-    if status == STATUS_OK and best_time.shape[0] > 0 and cutoff == np.inf:
+    mover_slots = best_time.shape[0] if mover_groups < 0 else slot_start[mover_groups]
+    if status == STATUS_OK and mover_slots > 0 and cutoff == np.inf:
         mover_slot = 0
-        for j in range(1, best_time.shape[0]):
+        for j in range(1, mover_slots):
             m = mover_slot
             if best_time[j] > best_time[m] or (
                 best_time[j] == best_time[m] and best_idx[j] < best_idx[m]

@@ -176,6 +176,10 @@ class RoadSpace:
             target, positions, speeds, requirement, np.inf
         )
         route.flags.writeable = False
+        if mover_slot < 0:  # ``requirement.mover_groups == 0``: nobody moves
+            return Assignment(
+                tuple(best_idx.tolist()), tuple(best_time.tolist()), -1, 0.0, 0.0, route
+            )
         return Assignment(
             served_by=tuple(best_idx.tolist()),
             times=tuple(best_time.tolist()),
@@ -213,6 +217,8 @@ class RoadSpace:
             target.edge, float(target.offset), edges, offsets, speed, groups, counts,
             buffers.dist, buffers.pred, buffers.touched, buffers.heap_key, buffers.heap_node,
             buffers.head, buffers.vehicle_links(edges.shape[0]), max(n, 1), cutoff,
+            None, None, None, None,
+            -1 if requirement.mover_groups is None else requirement.mover_groups,
         )  # fmt: skip
         status, detail = found[0], found[1]
         if status == STATUS_BAD_POSITION:
@@ -531,4 +537,7 @@ def _requirement_arrays(requirement: Requirement, n_vehicles: int) -> tuple[IntA
         raise InvalidInput("the requirement must give one group per vehicle")
     if counts.ndim != 1:
         raise InvalidInput("requirement counts must be a 1-d array")
+    movers = requirement.mover_groups
+    if movers is not None and not 0 <= movers <= counts.shape[0]:
+        raise InvalidInput("mover_groups must name a prefix of the requirement's groups")
     return groups, counts

@@ -13,6 +13,7 @@ from routing_svc.sa.fleet import (
     prior_counts,
 )
 from routing_svc.sa.learning import DEFAULT_RULE, learning_config
+from routing_svc.sa.live import LearningVehicles, Sent, Status, VehicleState
 from routing_svc.sa.objectives import COVERAGE, ROUTING, Objective
 from routing_svc.sa.plane import EuclideanPlane
 from routing_svc.sa.schedules import (
@@ -44,13 +45,17 @@ __all__ = [
     "FleetState",
     "Floor",
     "InverseScaling",
+    "LearningVehicles",
     "Objective",
     "Outcome",
     "Requirement",
     "Rule",
     "Schedule",
+    "Sent",
     "Space",
+    "Status",
     "Vehicle",
+    "VehicleState",
     "default_probe",
     "default_schedule",
     "learning_config",

@@ -13,6 +13,15 @@ served when the last of them arrives, and only that vehicle moves,
 ``step_amount`` (eqs. (9)-(10), see :mod:`routing_svc.sa.objectives`) along its
 shortest path toward ``z``.
 
+Vehicles also have a live state (:mod:`routing_svc.sa.live`): available or
+not, and where they are now. The same search answers who goes now
+(:attr:`Dispatch.sent`: the closest *available* vehicles by *current*
+position) apart from whose *reference* moves; :class:`LearningVehicles`
+chooses whether the mover is the closest reference of all vehicles (the
+paper's) or of the available ones. Under ``consolidating`` the held step acts
+on that mover's reference and consolidations on all references, as before
+(references are where vehicles wait when idle, busy or not).
+
 Three rules (:class:`Rule`): the paper's step alone; the paper's step with the
 backward probe; and ``consolidating``, the paper's step held at junctions
 (:mod:`routing_svc.sa.held_step`) with periodic consolidations
@@ -33,7 +42,7 @@ from typing import Any, Generic, cast
 
 import numpy as np
 
-from routing_svc.errors import Conflict, InvalidInput, ReplayMismatch
+from routing_svc.errors import Conflict, InvalidInput, NotFound, ReplayMismatch
 from routing_svc.sa.annealing import Annealing
 from routing_svc.sa.consolidation import (
     Consolidation,
@@ -42,6 +51,14 @@ from routing_svc.sa.consolidation import (
     consolidate,
 )
 from routing_svc.sa.held_step import Hold, JunctionSpace, held_step
+from routing_svc.sa.live import (
+    LearningVehicles,
+    Sent,
+    Status,
+    VehicleState,
+    live_search,
+    sent_from,
+)
 from routing_svc.sa.objectives import Objective
 from routing_svc.sa.requirements import build_requirement
 from routing_svc.sa.schedules import Counting, Schedule, schedule_from_dict
@@ -112,6 +129,9 @@ class FleetConfig:
     junction (:func:`routing_svc.sa.held_step.held_step`)."""
     consolidation: ConsolidationPolicy | None = None
     """``consolidating`` only: when to consolidate."""
+    learning_vehicles: LearningVehicles = LearningVehicles.ALL
+    """Among which vehicles the closest reference moves (:class:`LearningVehicles`):
+    all (the paper's eq. (10)) or the available ones only."""
 
     def __post_init__(self) -> None:
         if self.consolidation is None and self.window is None:
@@ -144,12 +164,15 @@ class FleetConfig:
             data["rule"] = Rule.CONSOLIDATING.value
             data["window"] = self.window
             data["consolidation"] = self.consolidation.to_dict()
+        if self.learning_vehicles is not LearningVehicles.ALL:
+            data["learning_vehicles"] = self.learning_vehicles.value
         return data
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> FleetConfig:
         """Settings from :meth:`to_dict`; a dict without ``rule`` (stored before the
-        rule existed) keeps the probe rule or the paper's, as it was."""
+        rule existed) keeps the probe rule or the paper's, as it was; without
+        ``learning_vehicles``, all vehicles learn."""
         annealing = data.get("annealing")
         rule = Rule(data.get("rule", Rule.PROBE if data.get("probe") is not None else "paper"))
         consolidating = rule is Rule.CONSOLIDATING
@@ -165,6 +188,7 @@ class FleetConfig:
             consolidation=ConsolidationPolicy.from_dict(data["consolidation"])
             if consolidating
             else None,
+            learning_vehicles=LearningVehicles(data.get("learning_vehicles", "all")),
         )
 
 
@@ -181,6 +205,9 @@ class FleetState(Generic[P]):
     with :attr:`FleetConfig.probe`. Empty means all unknown."""
     learning: Learning[P] | None = None
     """The ``consolidating`` rule's own state (``None`` for the other rules)."""
+    vehicle_states: list[VehicleState[P]] = field(default_factory=list)
+    """Per vehicle, its live state (:class:`~routing_svc.sa.live.VehicleState`); empty
+    means every vehicle is available at its reference. Replaced, never changed in place."""
 
 
 @dataclass(slots=True)
@@ -219,6 +246,10 @@ class Dispatch(Generic[P]):
     """The completion time ``T``: when the last required vehicle arrives."""
     objective: float
     """The service cost ``c(T)``."""
+    sent: Sent | None = None
+    """Who goes now: the closest available vehicles by current position (the
+    learning answer above names whose *reference* is closest). :class:`Fleet` always
+    fills it."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -268,6 +299,7 @@ class Fleet(Generic[P]):
     _speeds: np.ndarray = field(init=False, repr=False)
     _types: tuple[str, ...] = field(init=False, repr=False)
     _index: dict[str, int] = field(init=False, repr=False)
+    _ids: tuple[str, ...] = field(init=False, repr=False)
     _any_one: Requirement = field(init=False, repr=False)
     _identical: bool = field(init=False, repr=False)
     _probe_cache: _ProbeCache[P] | None = field(init=False, repr=False, default=None)
@@ -275,6 +307,9 @@ class Fleet(Generic[P]):
         init=False, repr=False, default=None
     )
     _gammas: tuple[FleetState[P], FleetConfig, list[int], np.ndarray] | None = field(
+        init=False, repr=False, default=None
+    )
+    _resting: tuple[list[VehicleState[P]], bool] | None = field(
         init=False, repr=False, default=None
     )
 
@@ -296,9 +331,14 @@ class Fleet(Generic[P]):
             self.state.entries = [None] * n
         if len(self.state.entries) != n:
             raise InvalidInput("one entry (or None) per vehicle")
+        if not self.state.vehicle_states:
+            self.state.vehicle_states = [VehicleState() for _ in range(n)]
+        if len(self.state.vehicle_states) != n:
+            raise InvalidInput("one vehicle state per vehicle")
         self._speeds = np.array([v.speed for v in self.vehicles], dtype=np.float64)
         self._types = tuple(v.type for v in self.vehicles)
         self._index = {v.id: i for i, v in enumerate(self.vehicles)}
+        self._ids = tuple(v.id for v in self.vehicles)
         self._any_one, _ = build_requirement(self._types, None)
         self._identical = len(set(self._types)) == 1 and bool(
             np.all(self._speeds == self._speeds[0])
@@ -345,23 +385,84 @@ class Fleet(Generic[P]):
         return self.config.schedule(k)
 
     def _search(self, target: P, requires: Sequence[str] | None) -> tuple[Dispatch[P], Any]:
+        """One search for both answers: who goes now and whose reference moves."""
         if requires:
-            requirement, _ = build_requirement(self._types, requires)
+            requirement, names = build_requirement(self._types, requires)
         else:
-            requirement = self._any_one
-        found = self.space.assign(target, self.state.positions, self._speeds, requirement)
-        ids = tuple(self.vehicles[i].id for i in found.served_by)
+            requirement, names = self._any_one, ("*",)
+        ids = self._ids
+        if self.at_rest():
+            found = self.space.assign(target, self.state.positions, self._speeds, requirement)
+            sent = sent_from(found, ids, names, requirement.counts)
+        else:
+            answer = live_search(
+                self.space,
+                target,
+                references=self.state.positions,
+                speeds=self._speeds,
+                vehicle_ids=ids,
+                requirement=requirement,
+                names=names,
+                states=self.state.vehicle_states,
+                learning_vehicles=self.config.learning_vehicles,
+            )
+            found, sent = answer.learning, answer.sent
         dispatch: Dispatch[P] = Dispatch(
-            served_by=ids,
+            served_by=tuple(ids[i] for i in found.served_by),
             times=found.times,
-            moved=self.vehicles[found.mover].id,
+            moved=ids[found.mover],
             cost=found.completion_time,
             objective=self.config.objective.cost(found.completion_time),
+            sent=sent,
         )
         return dispatch, found
 
+    def at_rest(self) -> bool:
+        """Whether every vehicle is available at its reference (then the dispatch answer
+        is the learning answer, under either :class:`LearningVehicles` rule)."""
+        states = self.state.vehicle_states
+        kept = self._resting
+        if kept is not None and kept[0] is states:
+            return kept[1]
+        resting = all(s.status is Status.AVAILABLE and s.position is None for s in states)
+        self._resting = (states, resting)
+        return resting
+
+    def vehicle_state(self, vehicle_id: str) -> VehicleState[P]:
+        """A vehicle's live state."""
+        return self.state.vehicle_states[self.vehicle_index(vehicle_id)]
+
+    def set_states(self, changes: Sequence[tuple[str, VehicleState[P]]]) -> None:
+        """Set vehicles' live states, all or none.
+
+        Each change is a vehicle id and its new state, applied in order. A change
+        without a timestamp keeps the vehicle's last one. Raises before changing
+        anything.
+
+        Raises
+        ------
+        NotFound
+            An unknown vehicle.
+        Conflict
+            A timestamp before the vehicle's last one (a report that goes back in time).
+        """
+        states = list(self.state.vehicle_states)
+        for vehicle_id, new in changes:
+            index = self.vehicle_index(vehicle_id)
+            last = states[index].timestamp
+            if new.timestamp is not None and last is not None and new.timestamp < last:
+                raise Conflict(
+                    f"vehicle {vehicle_id!r}: state at {new.timestamp} goes back before its "
+                    f"last report at {last}"
+                )
+            if new.timestamp is None and last is not None:
+                new = VehicleState(new.status, new.position, last)
+            states[index] = new
+        self.state.vehicle_states = states
+
     def assign(self, target: P, requires: Sequence[str] | None = None) -> Dispatch[P]:
-        """Who would serve ``target``; changes nothing."""
+        """Who would go now (:attr:`Dispatch.sent`) and whose reference would move;
+        changes nothing."""
         return self._search(target, requires)[0]
 
     def observe(self, target: P, requires: Sequence[str] | None = None) -> Outcome[P]:
@@ -374,7 +475,7 @@ class Fleet(Generic[P]):
         learning = self.state.learning
         if learning is not None and self.config.consolidation is not None:
             return self._observe_held(learning, self.config.consolidation, target, requires)
-        if not requires and self.config.annealing is None:
+        if not requires and self.config.annealing is None and self.at_rest():
             serving = self._serving()
             if serving is not None:
                 outcome = self._observe_compiled(serving, target)
@@ -575,7 +676,12 @@ class Fleet(Generic[P]):
         moved = self.vehicles[mover].id
         time = done.completion_time
         dispatch: Dispatch[P] = Dispatch(
-            (moved,), (time,), moved, time, self.config.objective.cost(time)
+            (moved,),
+            (time,),
+            moved,
+            time,
+            self.config.objective.cost(time),
+            Sent((moved,), ("*",), (time,)),
         )
         index = state.targets
         state.updates[mover] += 1
@@ -677,7 +783,22 @@ class Fleet(Generic[P]):
             "targets": self.state.targets,
             "entries": [None if e is None else self.space.encode(e) for e in self.state.entries],
             **({} if self.state.learning is None else {"learning": self._learning_dict()}),
+            **({} if self._states_default() else {"vehicle_states": self._states_list()}),
         }
+
+    def _states_default(self) -> bool:
+        return all(s.is_default for s in self.state.vehicle_states)
+
+    def _states_list(self) -> list[dict[str, Any]]:
+        encode = self.space.encode
+        return [
+            {
+                "status": s.status.value,
+                "position": None if s.position is None else encode(s.position),
+                "timestamp": s.timestamp,
+            }
+            for s in self.state.vehicle_states
+        ]
 
     def _learning_dict(self) -> dict[str, Any]:
         learning, policy = self.state.learning, self.config.consolidation
@@ -741,14 +862,31 @@ class Fleet(Generic[P]):
             if "learning" not in data:
                 raise InvalidInput("snapshot lacks the consolidating rule's state")
             learning = self._learning_from(data["learning"])
-        self.state = FleetState(positions, updates, int(data["targets"]), entries, learning)
+        states: list[VehicleState[P]] = [
+            VehicleState(
+                Status(s["status"]),
+                None if s["position"] is None else self.space.decode(s["position"]),
+                None if s["timestamp"] is None else float(s["timestamp"]),
+            )
+            for s in data.get("vehicle_states", ())
+        ]
+        if states and len(states) != len(positions):
+            raise InvalidInput("snapshot does not match the fleet's vehicles")
+        self.state = FleetState(
+            positions,
+            updates,
+            int(data["targets"]),
+            entries,
+            learning,
+            states or [VehicleState() for _ in positions],
+        )
 
     def vehicle_index(self, vehicle_id: str) -> int:
         """Index of a vehicle by id (vehicles are sorted by id)."""
         try:
             return self._index[vehicle_id]
         except KeyError:
-            raise InvalidInput(f"unknown vehicle {vehicle_id!r}") from None
+            raise NotFound(f"unknown vehicle {vehicle_id!r}") from None
 
 
 def prior_counts(

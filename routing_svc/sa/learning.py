@@ -13,6 +13,7 @@ from routing_svc.errors import InvalidInput
 from routing_svc.sa.annealing import Annealing
 from routing_svc.sa.consolidation import ConsolidationPolicy
 from routing_svc.sa.fleet import FleetConfig, Rule
+from routing_svc.sa.live import LearningVehicles
 from routing_svc.sa.objectives import Objective
 from routing_svc.sa.schedules import (
     DEFAULT_PROBE,
@@ -50,6 +51,7 @@ def learning_config(
     step_scale: float | None = None,
     prior_counts: tuple[int, ...] = (),
     consolidation: ConsolidationPolicy | None = None,
+    learning_vehicles: LearningVehicles | str = LearningVehicles.ALL,
 ) -> FleetConfig:
     """A :class:`FleetConfig` for ``rule`` with its defaults.
 
@@ -69,6 +71,10 @@ def learning_config(
         ``a / R`` of the default schedule (default: the rule's).
     consolidation : ConsolidationPolicy, optional
         When to consolidate (``consolidating`` rule; default :class:`ConsolidationPolicy`).
+    learning_vehicles : LearningVehicles or str
+        Among which vehicles the closest reference moves: ``all`` (the paper's) or
+        ``available`` (:class:`~routing_svc.sa.live.LearningVehicles`); every rule
+        takes either.
     """
     kind = Rule(rule)
     if kind is Rule.PROBE and probe == 0.0:
@@ -108,4 +114,5 @@ def learning_config(
         prior_counts=prior_counts,
         window=junction,
         consolidation=consolidation,
+        learning_vehicles=LearningVehicles(learning_vehicles),
     )

@@ -54,7 +54,11 @@ class EuclideanPlane:
             served_times.extend(float(times[i]) for i in order)
         if not served:
             raise Unreachable("no vehicle can serve the target")
-        mover = max(range(len(served)), key=lambda j: (served_times[j], -served[j]))
+        limit = requirement.mover_groups
+        slots = len(served) if limit is None else int(sum(requirement.counts[:limit]))
+        if slots == 0:
+            return Assignment(tuple(served), tuple(served_times), -1, 0.0, 0.0, None)
+        mover = max(range(slots), key=lambda j: (served_times[j], -served[j]))
         m = served[mover]
         return Assignment(
             served_by=tuple(served),

@@ -48,6 +48,11 @@ class Requirement:
 
     vehicle_groups: IntArray
     counts: IntArray
+    mover_groups: int | None = None
+    """The mover is the last to arrive among the served vehicles of groups
+    ``0 .. mover_groups - 1`` only (``None``: of every group; ``0``: no mover). The
+    other groups are searched in the same pass but move nobody: the vehicles a
+    target dispatches from their current positions (:mod:`routing_svc.sa.live`)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,7 +67,9 @@ class Assignment(Generic[P]):
     times : tuple[float, ...]
         Travel time ``D_i / v_i`` of each vehicle in ``served_by``.
     mover : int
-        Index of the vehicle that arrives last (largest time; ties: lower index).
+        Index of the vehicle that arrives last (largest time; ties: lower index)
+        among the groups of :attr:`Requirement.mover_groups`; ``-1`` when none
+        (``mover_groups == 0``, and then the times and the route are empty).
     completion_time : float
         The mover's travel time: the time at which the target is served.
     mover_cost : float

@@ -18,6 +18,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 from routing_svc import __version__
 from routing_svc.errors import Conflict, StorageError
 from routing_svc.network.identity import file_bytes_sha256
+from routing_svc.service import fleet_gauges
 from routing_svc.service.deadline import RequestDeadline
 from routing_svc.service.demo import ensure_demo_fleet, feed_demo_targets
 from routing_svc.service.fastpath import TARGET_PATH, TargetFastPath
@@ -26,7 +27,15 @@ from routing_svc.service.guards import Guards
 from routing_svc.service.networks import NetworkEntry, NetworkRegistry
 from routing_svc.service.problems import install_problem_handlers
 from routing_svc.service.responses import complete_document
-from routing_svc.service.routes import dashboard, fleets, health, networks, stream, targets
+from routing_svc.service.routes import (
+    dashboard,
+    fleets,
+    health,
+    networks,
+    stream,
+    targets,
+    vehicles,
+)
 from routing_svc.service.settings import Settings
 from routing_svc.service.store_health import StoreHealth
 from routing_svc.store import EventLog, NetworkRecord
@@ -161,6 +170,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             for entry in registry.all():
                 await asyncio.to_thread(entry.warm_up)
             service = FleetService(log, registry, recent_window=settings.recent_window)
+            fleet_gauges.COLLECTOR.track(service)
             app.state.settings = settings
             app.state.networks = registry
             app.state.fleets = service
@@ -206,6 +216,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         health.router,
         networks.router,
         fleets.router,
+        vehicles.router,
         stream.router,
         dashboard.router,
     ):

@@ -112,13 +112,37 @@ def _position(described: dict[str, Any]) -> str:
     raise _Untemplated
 
 
+def _dispatch(dispatch: dict[str, Any], cost: float, cost_text: str) -> str:
+    """``{"cost", "missing", "status", "vehicles": [{"cost", "type", "vehicle"}]}`` (the
+    dispatch answer, :meth:`routing_svc.sa.live.Sent.to_dict`), keys sorted; a cost equal
+    to the learning answer's ``cost`` is written from ``cost_text``."""
+    if len(dispatch) != 4:
+        raise _Untemplated
+    total = dispatch["cost"]
+    vehicles = []
+    for sent in dispatch["vehicles"]:
+        if len(sent) != 3:
+            raise _Untemplated
+        vehicles.append(
+            f'{{"cost":{_same_as(sent["cost"], cost, cost_text)},'
+            f'"type":{_string(sent["type"])},"vehicle":{_string(sent["vehicle"])}}}'
+        )
+    return (
+        f'{{"cost":{"null" if total is None else _same_as(total, cost, cost_text)},'
+        f'"missing":[{",".join(map(_string, dispatch["missing"]))}],'
+        f'"status":{_string(dispatch["status"])},"vehicles":[{",".join(vehicles)}]}}'
+    )
+
+
 class TargetResult(NamedTuple):
     """The result of a target event: what the client gets and the event log keeps.
 
     ``target`` and ``new_position`` are described positions (``edge, offset, x, y``
     and ``lon, lat`` where the network has a projection); ``new_position`` may be
     the ``target`` object itself. ``backed_off`` lists ``(vehicle id, described
-    position)``.
+    position)``. ``dispatch`` is the dispatch answer (who goes now,
+    :meth:`routing_svc.sa.live.Sent.to_dict`); ``None`` only for results stored before
+    it existed, which replay writes again without it.
     """
 
     seq: int
@@ -135,10 +159,13 @@ class TargetResult(NamedTuple):
     new_position: dict[str, Any]
     backed_off: Sequence[tuple[str, dict[str, Any]]]
     consolidated: dict[str, Any] | None = None
+    dispatch: dict[str, Any] | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """The result as the API documents it (``version`` is ``seq``)."""
         extra = {} if self.consolidated is None else {"consolidated": self.consolidated}
+        if self.dispatch is not None:
+            extra["dispatch"] = self.dispatch
         return extra | {
             "seq": self.seq,
             "version": self.seq,
@@ -174,6 +201,7 @@ class TargetResult(NamedTuple):
             raise _Untemplated
         cost = self.cost
         cost_text = _number(cost)
+        dispatch_text = "" if self.dispatch is None else _dispatch(self.dispatch, cost, cost_text)
         seq_text = _number(self.seq)
         target_text = _position(self.target)
         new_position = self.new_position
@@ -189,6 +217,7 @@ class TargetResult(NamedTuple):
                 ),
                 '],"cost":',
                 cost_text,
+                "" if self.dispatch is None else ',"dispatch":' + dispatch_text,
                 ',"moved":',
                 _string(self.moved),
                 ',"moved_by":',

@@ -72,6 +72,7 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
         else Annealing(spec.annealing.scale, spec.annealing.decay),
         probe=None if rule == "paper" and spec.probe == 0.0 else spec.probe,
         prior_counts=counts,
+        learning_vehicles=spec.learning_vehicles,
     )
     reference = None
     if demand_spec is not None:
@@ -95,4 +96,5 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
             for v in spec.vehicles
         ],
         "reference": reference,
+        "service_thresholds": list(spec.service_thresholds),
     }

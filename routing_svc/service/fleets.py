@@ -62,8 +62,9 @@ from routing_svc.service.canonical import dumps
 from routing_svc.service.committer import Committer
 from routing_svc.service.creation import build_created_payload
 from routing_svc.service.networks import NetworkEntry, NetworkRegistry
-from routing_svc.service.runtime import FleetRuntime
-from routing_svc.service.schemas import FleetSpec, TargetSpec
+from routing_svc.service.runtime import FleetRuntime, same_snapshot
+from routing_svc.service.schemas import FleetSpec, TargetSpec, VehicleStateChange
+from routing_svc.service.vehicle_states import resolve_changes
 from routing_svc.store import EventLog, EventRecord, FleetGroup, GroupItem, NewEvent
 from routing_svc.types import NetPosition
 
@@ -256,6 +257,7 @@ class FleetService:
         self._loop_queue: deque[_Pending] = deque()
         self._loop_drain: asyncio.Task[None] | None = None
         self._committer: Committer | None = None
+        self._levels_seen: dict[str, dict[str, Any]] = {}
 
     # -- plumbing ---------------------------------------------------------------
 
@@ -290,8 +292,14 @@ class FleetService:
         runtime = FleetRuntime(
             fleet_id, entry, json.loads(first.payload_json), recent_window=self.recent_window
         )
-        if record.state_json is not None and record.snapshot_version is not None:
-            runtime.restore(record.state_json)
+        if (
+            record.state_json is not None
+            and record.snapshot_version is not None
+            and not runtime.restore(record.state_json)
+        ):  # a snapshot older than service levels: replay the fleet from its start
+            runtime = FleetRuntime(
+                fleet_id, entry, json.loads(first.payload_json), recent_window=self.recent_window
+            )
         self._replay(runtime, self.log.events_since(fleet_id, runtime.version))
         return runtime
 
@@ -655,6 +663,29 @@ class FleetService:
         with self._locked(fleet_id):
             return self._runtime(fleet_id).metrics()
 
+    def cached_service_levels(self) -> list[tuple[str, dict[str, Any]]]:
+        """``(fleet id, service levels)`` of every fleet in memory (no database read).
+
+        A fleet's lock is only tried, never waited for: the event loop may hold it
+        across an ``await`` (:meth:`_commit_on_loop`), and a scrape runs on that loop.
+        A fleet whose lock is taken reports what it reported last.
+        """
+        out = []
+        for fleet_id in sorted(self._cache):
+            lock = self._lock_of(fleet_id)
+            if lock.acquire(blocking=False):
+                try:
+                    runtime = self._cache.get(fleet_id)
+                    if runtime is None or runtime.deleted:
+                        self._levels_seen.pop(fleet_id, None)
+                    else:
+                        self._levels_seen[fleet_id] = runtime.levels.report()
+                finally:
+                    lock.release()
+            if fleet_id in self._levels_seen:
+                out.append((fleet_id, self._levels_seen[fleet_id]))
+        return out
+
     def events(self, fleet_id: str, *, after: int, limit: int) -> list[dict[str, Any]]:
         return [
             {
@@ -729,20 +760,64 @@ class FleetService:
         ).result()
 
     def assign(self, fleet_id: str, target: TargetSpec) -> dict[str, Any]:
+        """Who would go now (``dispatch``) and whose reference would move (``moved``,
+        from the closest references ``served_by``); changes nothing."""
         ((position, requires),) = self._resolve_targets(fleet_id, [target])
         with self._locked(fleet_id):
             runtime = self._runtime(fleet_id)
             d = runtime.fleet.assign(position, requires)
+            assert d.sent is not None
             return {
                 "version": runtime.version,
                 "target": runtime.entry.describe(position),
                 "requires": requires,
+                "dispatch": d.sent.to_dict(),
                 "served_by": list(d.served_by),
                 "times": list(d.times),
                 "moved": d.moved,
                 "cost": d.cost,
                 "objective": d.objective,
             }
+
+    def submit_vehicle_states(
+        self,
+        fleet_id: str,
+        changes: Sequence[VehicleStateChange],
+        *,
+        idempotency_key: str | None = None,
+        body: Any = None,
+    ) -> Outcome:
+        """Queue vehicles' new live states, one ``vehicle_state`` event, all or none.
+
+        Positions are resolved first, so a position off the network fails here
+        and queues nothing; an unknown vehicle or a timestamp that goes back in
+        time fails the request when it is applied, before anything changed.
+        """
+        with self._locked(fleet_id):
+            entry = self._runtime(fleet_id, fresh=False).entry
+        resolved = [(c, None if c.position is None else entry.resolve(c.position)) for c in changes]
+
+        def compute(runtime: FleetRuntime) -> list[NewEvent]:
+            payload, result = runtime.apply_vehicle_states(resolve_changes(runtime, resolved))
+            return [NewEvent("vehicle_state", payload, result)]
+
+        digest = request_hash(body) if idempotency_key is not None else None
+        return self.submit(fleet_id, compute, idempotency_key=idempotency_key, digest=digest)
+
+    def put_vehicle_states(
+        self,
+        fleet_id: str,
+        changes: Sequence[VehicleStateChange],
+        *,
+        idempotency_key: str | None = None,
+        body: Any = None,
+    ) -> dict[str, Any]:
+        """Apply :meth:`submit_vehicle_states` and wait for its commit; the event's result."""
+        results, _ = self.submit_vehicle_states(
+            fleet_id, changes, idempotency_key=idempotency_key, body=body
+        ).result()
+        data: dict[str, Any] = json.loads(results[0])
+        return data
 
     def put_travel_times(self, fleet_id: str, times: dict[str, float]) -> dict[str, Any]:
         with self._locked(fleet_id):
@@ -777,7 +852,7 @@ class FleetService:
         at = record.snapshot_version
         if record.state_json is not None and at is not None:
             self._replay(runtime, [e for e in events[1:] if e.seq <= at])
-            identical = runtime.snapshot_json() == record.state_json
+            identical = same_snapshot(runtime.snapshot_json(), record.state_json)
             if not identical:
                 raise ReplayMismatch(
                     f"fleet {fleet_id!r}: the replayed state at version {at} differs from the "

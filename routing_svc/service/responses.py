@@ -153,12 +153,18 @@ class DescribedPosition(Answer):
 
 
 class VehicleAnswer(Answer):
-    """A vehicle: type, speed, reference position and the number of its updates."""
+    """A vehicle: type, speed, its reference (what learning moves), its live state and the
+    number of its updates."""
 
     id: str
     type: str
     speed: Number
-    position: DescribedPosition
+    position: DescribedPosition = Field(description="The reference (as before ``reference``).")
+    reference: DescribedPosition = Field(description="Where it waits when idle.")
+    status: Literal["available", "busy", "offline"]
+    current: DescribedPosition = Field(description="Where it is now.")
+    at_reference: bool = Field(description="Whether ``current`` follows the reference.")
+    timestamp: Number | None = Field(description="Its last reported time (epoch seconds).")
     updates: int
 
 
@@ -174,6 +180,8 @@ class FleetAnswer(Answer):
     annealing: dict[str, Any] | None
     seed: int
     rule: str
+    learning_vehicles: Literal["all", "available"]
+    service_thresholds: list[Number]
     probe: Number | None
     version: int
     targets: int
@@ -215,6 +223,24 @@ class OptimumGap(Answer):
     proven_optimal: bool
 
 
+class LevelsOver(Answer):
+    """Service levels over some targets (see ``docs/api.md``)."""
+
+    targets: int
+    undispatched: int = Field(description="Targets not dispatched in full (queued, partial).")
+    within: list[Number | None] = Field(description="Fraction within each threshold.")
+    percentiles: dict[str, Number | None] = Field(description="p50, p90, p95 of the completion.")
+    window: int | None = None
+
+
+class ServiceLevels(Answer):
+    """The completion cost of the dispatched vehicles against the fleet's thresholds."""
+
+    thresholds: list[Number]
+    all: LevelsOver
+    recent: LevelsOver
+
+
 class FleetMetrics(Answer):
     """Targets applied, mean costs, step sizes, update counts and the gap to the optimum."""
 
@@ -226,9 +252,27 @@ class FleetMetrics(Answer):
     step_size: dict[str, Number]
     updates: dict[str, int]
     optimum: OptimumGap | None
+    service_levels: ServiceLevels
 
 
 # -- targets ------------------------------------------------------------------
+
+
+class SentVehicle(Answer):
+    """A vehicle sent to a target."""
+
+    vehicle: str
+    type: str = Field(description="The required type it fills ('*': any one vehicle).")
+    cost: Number = Field(description="Its travel time D / v from its current position.")
+
+
+class DispatchAnswer(Answer):
+    """Who goes now: per required type the closest available vehicles by current position."""
+
+    status: Literal["dispatched", "partial", "queued"]
+    vehicles: list[SentVehicle]
+    missing: list[str] = Field(description="One entry per required vehicle nobody fills.")
+    cost: Number | None = Field(description="The completion: the last one's arrival.")
 
 
 class Assignment(Answer):
@@ -237,6 +281,7 @@ class Assignment(Answer):
     version: int
     target: DescribedPosition
     requires: list[str] | None
+    dispatch: DispatchAnswer
     served_by: list[str]
     times: list[Number]
     moved: str | None
@@ -259,6 +304,9 @@ class TargetResult(Answer):
     )
     backed_off: list[BackedOff]
     cost: Number
+    dispatch: DispatchAnswer | None = Field(
+        default=None, description="Who was sent (absent only in results stored before it)."
+    )
     moved: str
     moved_by: Number
     new_position: DescribedPosition
@@ -278,6 +326,14 @@ class TargetBatchResult(Answer):
 
     version: int
     results: list[TargetResult]
+
+
+class VehicleStateResult(Answer):
+    """The ``vehicle_state`` event: the changed vehicles as they are now."""
+
+    seq: int
+    version: int
+    vehicles: list[VehicleAnswer]
 
 
 class TravelTimesResult(Answer):

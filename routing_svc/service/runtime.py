@@ -6,10 +6,13 @@ applied events):
 - ``fleet_created`` (seq 1): network, cost, config, vehicles with their
   starting positions, the optional reference demand and its optimum;
 - ``target``: a snapped target position and its required types; the result is
-  the answer the client got (:meth:`FleetRuntime.apply_target`), with the
+  the answer the client got (:meth:`FleetRuntime.apply_target`: the dispatch
+  answer, who goes now, and the learning step, whose reference moved), with the
   consolidation the target triggered, if any (``consolidating`` fleets), which
   replay applies as recorded instead of solving it again;
 - ``weights_updated``: per-edge travel times (traffic-driven costs);
+- ``vehicle_state``: vehicles' new live states (status, current position or
+  ``null`` for "at its reference", timestamp), applied all or none;
 - ``fleet_deleted``.
 
 Applying the same events in the same order gives bit-identical state: every
@@ -28,9 +31,11 @@ from routing_svc.demand import DemandDistribution
 from routing_svc.errors import Conflict, InvalidInput, ReplayMismatch
 from routing_svc.network import RoadSpace
 from routing_svc.sa import Consolidation, Fleet, FleetConfig, Vehicle
+from routing_svc.sa.live import Status, VehicleState
 from routing_svc.service.canonical import TargetResult, dumps, target_payload
 from routing_svc.service.networks import NetworkEntry
 from routing_svc.service.reference import build_demand, expected_cost_now
+from routing_svc.service.service_levels import DEFAULT_THRESHOLDS, ServiceLevels
 from routing_svc.types import NetPosition
 
 
@@ -60,6 +65,9 @@ class FleetRuntime:
         self.deleted = False
         self.cost_sum = 0.0
         self.recent: deque[float] = deque(maxlen=recent_window)
+        self.levels = ServiceLevels(
+            created.get("service_thresholds", DEFAULT_THRESHOLDS), window=recent_window
+        )
         self.reference: dict[str, Any] | None = created.get("reference")
         self._reference_distribution: DemandDistribution[NetPosition] | None = None
 
@@ -72,11 +80,14 @@ class FleetRuntime:
         *,
         recorded: Consolidation[NetPosition] | None = None,
         replaying: bool = False,
+        legacy: bool = False,
     ) -> tuple[str, str]:
         """Serve one target; return the event's payload and result JSON.
 
         ``replaying``: the event is read back from the log, and ``recorded`` is the
         consolidation its stored result holds (applied, not solved again).
+        ``legacy``: the stored result predates the dispatch answer; it is written
+        again without it.
         """
         self._check_live()
         if replaying:
@@ -110,12 +121,44 @@ class FleetRuntime:
             consolidated=None
             if outcome.consolidation is None
             else outcome.consolidation.to_dict(self.base_space.encode),
+            dispatch=None if legacy or d.sent is None else d.sent.to_dict(),
         ).to_json()
         payload = target_payload(self.base_space.encode(target), required)
         self.version = seq
         self.cost_sum += d.cost
         self.recent.append(d.cost)
+        self.levels.record(d.cost if d.sent is None else d.sent.completion)
         return payload, result
+
+    def apply_vehicle_states(
+        self, changes: Sequence[tuple[str, VehicleState[NetPosition]]]
+    ) -> tuple[str, str]:
+        """Set vehicles' live states, all or none; return the event's payload and result.
+
+        Raises (changing nothing) for an unknown vehicle or a timestamp that goes
+        back in time (:meth:`Fleet.set_states`).
+        """
+        self._check_live()
+        self.fleet.set_states(changes)
+        encode = self.base_space.encode
+        payload = dumps(
+            {
+                "changes": [
+                    {
+                        "vehicle": vid,
+                        "status": state.status.value,
+                        "position": None if state.position is None else encode(state.position),
+                        "timestamp": state.timestamp,
+                    }
+                    for vid, state in changes
+                ]
+            }
+        )
+        seq = self.version + 1
+        self.version = seq
+        changed = sorted({vid for vid, _ in changes})
+        vehicles = [self._vehicle_view(self.fleet.vehicle_index(vid)) for vid in changed]
+        return payload, dumps({"seq": seq, "version": seq, "vehicles": vehicles})
 
     def apply_travel_times(self, times: dict[str, float]) -> tuple[str, str]:
         """Replace per-edge travel times (only for ``cost = time``)."""
@@ -145,9 +188,24 @@ class FleetRuntime:
         if kind == "target":
             target = self.base_space.decode(payload["target"])
             recorded = self._recorded_consolidation(result_json)
+            legacy = result_json is not None and '"dispatch"' not in result_json
             _, result = self.apply_target(
-                target, payload["requires"], recorded=recorded, replaying=True
+                target, payload["requires"], recorded=recorded, replaying=True, legacy=legacy
             )
+        elif kind == "vehicle_state":
+            decode = self.base_space.decode
+            changes = [
+                (
+                    str(c["vehicle"]),
+                    VehicleState(
+                        Status(c["status"]),
+                        None if c["position"] is None else decode(c["position"]),
+                        None if c["timestamp"] is None else float(c["timestamp"]),
+                    ),
+                )
+                for c in payload["changes"]
+            ]
+            _, result = self.apply_vehicle_states(changes)
         elif kind == "weights_updated":
             _, result = self.apply_travel_times(payload["times"])
         elif kind == "fleet_deleted":
@@ -183,12 +241,18 @@ class FleetRuntime:
                 "cost_sum": self.cost_sum,
                 "recent": list(self.recent),
                 "deleted": self.deleted,
+                "service_levels": self.levels.to_dict(),
             }
         )
 
-    def restore(self, snapshot_json: str) -> None:
-        """Load :meth:`snapshot_json` output."""
+    def restore(self, snapshot_json: str) -> bool:
+        """Load :meth:`snapshot_json` output; ``False`` (nothing loaded) for a snapshot
+        written before service levels existed: the fleet is then replayed from its
+        first event, which derives them."""
         data = json.loads(snapshot_json)
+        if "service_levels" not in data:
+            return False
+        self.levels.restore(data["service_levels"])
         if data["travel_times"]:
             self.travel_times = {k: float(v) for k, v in data["travel_times"].items()}
             self.fleet.space = self.base_space.with_travel_times(self.travel_times)
@@ -198,6 +262,7 @@ class FleetRuntime:
         self.recent.clear()
         self.recent.extend(float(c) for c in data["recent"])
         self.deleted = bool(data["deleted"])
+        return True
 
     def describe(self) -> dict[str, Any]:
         """The fleet as the API shows it."""
@@ -212,25 +277,33 @@ class FleetRuntime:
             "annealing": None if cfg.annealing is None else cfg.annealing.to_dict(),
             "seed": cfg.seed,
             "rule": cfg.rule.value,
+            "learning_vehicles": cfg.learning_vehicles.value,
+            "service_thresholds": list(self.levels.thresholds),
             "probe": cfg.probe,
             "version": self.version,
             "targets": self.fleet.state.targets,
-            "vehicles": [
-                {
-                    "id": v.id,
-                    "type": v.type,
-                    "speed": v.speed,
-                    "position": self.entry.describe(p),
-                    "updates": n,
-                }
-                for v, p, n in zip(
-                    self.fleet.vehicles,
-                    self.fleet.state.positions,
-                    self.fleet.state.updates,
-                    strict=True,
-                )
-            ],
+            "vehicles": [self._vehicle_view(i) for i in range(len(self.fleet.vehicles))],
             "reference_demand": None if self.reference is None else self.reference["demand"],
+        }
+
+    def _vehicle_view(self, index: int) -> dict[str, Any]:
+        """A vehicle as the API shows it: its reference (``position``, what learning
+        moves), its status and current position (``current``)."""
+        fleet = self.fleet
+        v = fleet.vehicles[index]
+        reference = self.entry.describe(fleet.state.positions[index])
+        state = fleet.state.vehicle_states[index]
+        return {
+            "id": v.id,
+            "type": v.type,
+            "speed": v.speed,
+            "position": reference,
+            "reference": reference,
+            "status": state.status.value,
+            "current": reference if state.position is None else self.entry.describe(state.position),
+            "at_reference": state.position is None,
+            "timestamp": state.timestamp,
+            "updates": fleet.state.updates[index],
         }
 
     def metrics(self) -> dict[str, Any]:
@@ -246,6 +319,7 @@ class FleetRuntime:
             "step_size": {v.id: fleet.step_size(i) for i, v in enumerate(fleet.vehicles)},
             "updates": {v.id: u for v, u in zip(fleet.vehicles, fleet.state.updates, strict=True)},
             "optimum": self._optimum_gap(),
+            "service_levels": self.levels.report(),
         }
 
     def reference_distribution(self) -> DemandDistribution[NetPosition]:
@@ -277,3 +351,18 @@ def check_requires(requires: Sequence[str] | None) -> list[str] | None:
     if any(not isinstance(r, str) or not r for r in requires):
         raise InvalidInput("requires must be a list of non-empty type names")
     return list(requires)
+
+
+def same_snapshot(replayed: str, stored: str) -> bool:
+    """Whether a replayed :meth:`FleetRuntime.snapshot_json` matches a stored one.
+
+    A snapshot stored before service levels existed lacks their key: the rest
+    must still match byte for byte.
+    """
+    if replayed == stored:
+        return True
+    data, kept = json.loads(replayed), json.loads(stored)
+    if "service_levels" in kept:
+        return False
+    data.pop("service_levels", None)
+    return dumps(data) == stored

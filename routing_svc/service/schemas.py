@@ -2,9 +2,17 @@
 
 from __future__ import annotations
 
+from itertools import pairwise
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StringConstraints, field_validator
+from pydantic import (
+    AwareDatetime,
+    BaseModel,
+    ConfigDict,
+    Field,
+    StringConstraints,
+    field_validator,
+)
 
 from routing_svc.sa import DEFAULT_RULE
 
@@ -166,6 +174,31 @@ class FleetSpec(Strict):
         | None
     ) = None
 
+    learning_vehicles: Annotated[
+        Literal["all", "available"],
+        Field(
+            description="Whose reference learns from a target: 'all' (the paper's eq. (10): "
+            "the closest reference moves, busy or not) or 'available' (the closest reference "
+            "among the available vehicles moves, as in the hypercube model).",
+        ),
+    ] = "all"
+    service_thresholds: Annotated[
+        list[Annotated[float, Field(allow_inf_nan=False, gt=0.0, le=1e9)]],
+        Field(
+            min_length=1,
+            max_length=16,
+            description="Service-level thresholds in cost units: the metrics report the "
+            "fraction of targets the dispatched vehicles complete within each.",
+        ),
+    ] = [300.0, 600.0, 900.0]
+
+    @field_validator("service_thresholds")
+    @classmethod
+    def _increasing(cls, thresholds: list[float]) -> list[float]:
+        if any(b <= a for a, b in pairwise(thresholds)):
+            raise ValueError("service thresholds must be strictly increasing")
+        return thresholds
+
     def learning_rule(self) -> str:
         """The rule asked for: ``rule``; else the probe rule when a probe window or
         annealing is given (the paper's for a window of 0); else the default for
@@ -203,3 +236,36 @@ class TravelTimes(Strict):
         Annotated[str, StringConstraints(min_length=1, max_length=256)],
         Annotated[float, Field(allow_inf_nan=False, gt=0.0, le=1e7)],
     ]
+
+
+# -- vehicle state and dispatch ---------------------------------------------------
+
+VehicleStatus = Literal["available", "busy", "offline"]
+Timestamp = Annotated[float, Field(allow_inf_nan=False, ge=0.0, le=1e11)] | AwareDatetime
+
+
+class VehicleStateSpec(Strict):
+    """A vehicle's new live state (``PUT /v1/fleets/{id}/vehicles/{vid}/state``)."""
+
+    status: VehicleStatus
+    position: Position | None = Field(
+        None,
+        description="Where the vehicle is now; left out: where it was; null: at its reference.",
+    )
+    timestamp: Timestamp | None = Field(
+        None,
+        description="When the state was observed (seconds since the epoch or ISO 8601 with "
+        "a zone); may not go back before the vehicle's last timestamp.",
+    )
+
+
+class VehicleStateChange(VehicleStateSpec):
+    """One vehicle's new state in a batch."""
+
+    vehicle: Identifier
+
+
+class VehicleStateBatch(Strict):
+    """Many vehicles' new states, applied together or not at all."""
+
+    changes: Annotated[list[VehicleStateChange], Field(min_length=1, max_length=10_000)]

@@ -101,6 +101,8 @@ class DashboardPage:
                     screen: [box.x + box.width / 2, box.y + box.height / 2],
                     projected: [p.x, p.y],
                     fill: c.getAttribute('fill'),
+                    stroke: c.getAttribute('stroke'),
+                    status: c.dataset.status,
                 };
             })""",
         )

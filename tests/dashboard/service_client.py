@@ -86,6 +86,12 @@ class ServiceClient:
         result: dict[str, Any] = r.json()
         return result
 
+    def set_state(self, fleet_id: str, vehicle: str, body: dict[str, Any]) -> dict[str, Any]:
+        r = self.http.put(f"/v1/fleets/{fleet_id}/vehicles/{vehicle}/state", json=body)
+        assert r.status_code == 200, r.text
+        result: dict[str, Any] = r.json()
+        return result
+
     def post_batch(self, fleet_id: str, targets: list[dict[str, Any]]) -> list[dict[str, Any]]:
         r = self.http.post(f"/v1/fleets/{fleet_id}/targets:batch", json={"targets": targets})
         assert r.status_code == 200, r.text

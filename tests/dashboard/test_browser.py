@@ -17,6 +17,8 @@ KEYBOARD_CONTROLS = {
     *("fleet-select", "zoom-in", "zoom-out", "zoom-fit", "show-trails", "show-targets"),
     *("map", "place-target", "post-centre"),
 }
+AVAILABLE, BUSY = "#1b7f3b", "#e67e22"
+"""The fill of an available and of a busy vehicle (``STATUS_COLORS`` in fleet_layer.js)."""
 CLEAN: dict[str, list[str]] = {"console_errors": [], "failed_requests": [], "external_requests": []}
 
 
@@ -104,9 +106,11 @@ def test_vehicles_appear_where_the_api_says(
         # the marker is drawn on screen where the map puts that network point
         assert math.dist(mark["screen"], mark["projected"]) < 1.0
         assert math.dist(mark["screen"], dash.screen_point(x, y)) < 1.0
-    colours = {mark["type"]: mark["fill"] for mark in shown.values()}
-    assert all(mark["fill"] == colours[mark["type"]] for mark in shown.values())
+    # the type is the ring, the status the fill
+    colours = {mark["type"]: mark["stroke"] for mark in shown.values()}
+    assert all(mark["stroke"] == colours[mark["type"]] for mark in shown.values())
     assert len(set(colours.values())) == 3
+    assert {(mark["status"], mark["fill"]) for mark in shown.values()} == {("available", AVAILABLE)}
     assert dash.problems() == CLEAN
 
 
@@ -377,4 +381,37 @@ def test_a_deleted_fleet_is_reported(
     )
     assert dash.page.get_attribute("body", "data-fleet") == fleet_id
     dash.screenshot("deleted")
+    assert dash.problems() == CLEAN
+
+
+def test_vehicle_states_dispatch_lines_and_service_levels_are_drawn(
+    shared_server: LiveServer, api: ServiceClient, fleet_id: str, open_dashboard: OpenDashboard
+) -> None:
+    api.create_fleet(fleet_id, ["A", "A", "A"], rule="paper")
+    dash = open_dashboard(shared_server).open(fleet_id)
+    target = edge_position(api, 4)
+    busy = api.post_target(fleet_id, target)["dispatch"]["vehicles"][0]["vehicle"]
+    away = edge_position(api, 11)
+    shown = api.set_state(fleet_id, busy, {"status": "busy", "position": away})["vehicles"][0]
+    result = api.post_target(fleet_id, target)
+    (sent,) = [s["vehicle"] for s in result["dispatch"]["vehicles"]]
+    assert sent != busy
+    line = f"line.dispatch[data-target='{result['seq']}'][data-vehicle='{sent}']"
+    dash.page.wait_for_selector(line, state="attached", timeout=LIVE_UPDATE_MS)
+    dash.page.wait_for_selector(
+        f"circle.vehicle[data-vehicle='{busy}'][data-status='busy']", state="attached"
+    )
+    dash.page.wait_for_selector("#chart-levels polyline.series", state="attached", timeout=LOAD_MS)
+    dash.screenshot("vehicle-states")
+
+    marks = dash.vehicles()
+    assert (marks[busy]["status"], marks[busy]["fill"]) == ("busy", BUSY)
+    # drawn at its current position, tied to its reference
+    assert (marks[busy]["cx"], marks[busy]["cy"]) == (shown["current"]["x"], -shown["current"]["y"])
+    anchor = dash.page.locator(f"line.anchor[data-vehicle='{busy}']")
+    assert anchor.get_attribute("class") == "anchor away"
+    assert float(anchor.get_attribute("x2") or "nan") == shown["reference"]["x"]
+    assert dash.page.locator("line.dispatch").count() == 1
+    levels = dash.page.locator("#chart-levels polyline.series")
+    assert levels.count() == 3  # one line per threshold
     assert dash.problems() == CLEAN

@@ -42,6 +42,28 @@ def _position(rng: np.random.Generator) -> dict[str, Any]:
     return described
 
 
+def _dispatch(rng: np.random.Generator, cost: float) -> dict[str, Any] | None:
+    """A dispatch answer (or none, as in results stored before it existed)."""
+    if rng.random() < 0.2:
+        return None
+    sent = [
+        {
+            "vehicle": str(rng.choice(_STRINGS)),
+            "type": str(rng.choice(["*", *_STRINGS])),
+            "cost": cost if rng.random() < 0.5 else _float(rng),
+        }
+        for _ in range(int(rng.integers(0, 3)))
+    ]
+    missing = [] if rng.random() < 0.7 else [str(rng.choice(_STRINGS))]
+    done = sent and not missing
+    return {
+        "status": "dispatched" if done else "partial" if sent else "queued",
+        "vehicles": sent,
+        "missing": missing,
+        "cost": (cost if rng.random() < 0.5 else _float(rng)) if done else None,
+    }
+
+
 def _arguments(rng: np.random.Generator) -> dict[str, Any]:
     cost = _float(rng)
     target = _position(rng)
@@ -64,6 +86,7 @@ def _arguments(rng: np.random.Generator) -> dict[str, Any]:
         "backed_off": [
             (str(rng.choice(_STRINGS)), _position(rng)) for _ in range(int(rng.integers(0, 3)))
         ],
+        "dispatch": _dispatch(rng, cost),
     }
 
 
@@ -80,12 +103,14 @@ def test_the_dict_is_the_result_the_api_documents() -> None:
     rng = np.random.default_rng(12)
     arguments = _arguments(rng)
     arguments["backed_off"] = [("v07", arguments["target"])]
+    arguments["dispatch"] = {"status": "queued", "vehicles": [], "missing": ["*"], "cost": None}
     result = json.loads(TargetResult(**arguments).to_json())
+    assert result["dispatch"] == arguments["dispatch"]
     assert result["seq"] == result["version"] == arguments["seq"]
     assert result["backed_off"] == [{"vehicle": "v07", "position": arguments["target"]}]
     assert set(result) == {
         "seq", "version", "target", "requires", "served_by", "times", "moved", "cost",
-        "objective", "step_size", "moved_by", "noise", "new_position", "backed_off",
+        "objective", "step_size", "moved_by", "noise", "new_position", "backed_off", "dispatch",
     }  # fmt: skip
 
 
@@ -105,6 +130,7 @@ def test_same_zero_is_not_taken_for_the_other() -> None:
         {"moved_by": math.inf},
         {"step_size": -math.inf},
         {"times": [math.nan]},
+        {"dispatch": {"status": "dispatched", "vehicles": [], "missing": [], "cost": math.inf}},
     ],
 )
 def test_nan_and_infinity_raise_like_the_encoder(change: dict[str, Any]) -> None:
@@ -122,6 +148,15 @@ def test_nan_and_infinity_raise_like_the_encoder(change: dict[str, Any]) -> None
         {"moved": None},
         {"target": {"edge": "e", "offset": 1.0, "x": 2.0, "y": 3.0, "z": 4.0}},
         {"new_position": {"edge": "e", "offset": 1.0, "x": 2.0, "y": 3.0, "lon": 4.0}},
+        {"dispatch": {"status": "queued", "vehicles": [], "missing": [], "cost": None, "x": 1}},
+        {
+            "dispatch": {
+                "status": "queued",
+                "vehicles": [{"vehicle": "v"}],
+                "missing": [],
+                "cost": 2,
+            }
+        },
     ],
 )
 def test_what_the_template_does_not_cover_goes_to_the_encoder(change: dict[str, Any]) -> None:

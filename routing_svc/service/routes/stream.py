@@ -10,7 +10,11 @@ stream sends
   answer its poster got: ``served_by``, ``moved``, ``new_position``,
   ``target``, ``requires``, ``cost``, ``step_size`` ...);
 - ``event: metrics`` with ``GET /v1/fleets/{id}/metrics``, first at once and
-  then after new events, at most every :data:`METRICS_SECONDS`;
+  then after new events, at most every :data:`METRICS_SECONDS`; its
+  ``service_levels`` hold the fraction of targets completed within each of the
+  fleet's thresholds and the completion cost's percentiles, over all targets
+  and the recent window (a ``vehicle_state`` event's ``result`` lists the
+  vehicles it changed, a target's its ``dispatch`` answer);
 - ``event: problem`` (a problem document) when the stream cannot go on;
 - a comment line every :data:`KEEPALIVE_SECONDS` when nothing else was sent.
 

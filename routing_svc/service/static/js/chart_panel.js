@@ -1,7 +1,9 @@
 /**
  * The "Learning" panel: running mean service cost (whole run and the recent
  * window, with the optimum when the fleet has a reference demand), the step
- * size of each update, and the number of updates of each vehicle.
+ * size of each update, the number of updates of each vehicle, and the service
+ * levels (the fraction of the recent window's targets that the dispatched
+ * vehicles completed within each threshold, from the stream's metrics).
  */
 
 import { BarChart, LineChart } from "./charts.js";
@@ -11,6 +13,7 @@ const MEAN = "#1d2330";
 const RECENT = "#0b84d8";
 const EXPECTED = "#8e44ad";
 const OPTIMUM = "#1b7f3b";
+const LEVELS = ["#1b7f3b", "#e67e22", "#c0392b", "#0b84d8", "#8e44ad"];
 
 export class ChartPanel {
   constructor(root) {
@@ -19,6 +22,7 @@ export class ChartPanel {
     this.cost = new LineChart(root.querySelector("#chart-cost"));
     this.step = new LineChart(root.querySelector("#chart-step"), { height: 120 });
     this.updates = new BarChart(root.querySelector("#chart-updates"), { height: 110 });
+    this.levels = new LineChart(root.querySelector("#chart-levels"), { height: 120 });
   }
 
   render(state, colors) {
@@ -33,6 +37,22 @@ export class ChartPanel {
     this.renderCost(state);
     this.renderStep(state, colors);
     this.renderUpdates(state, colors);
+    this.renderLevels(state);
+  }
+
+  renderLevels(state) {
+    const series = state.thresholds.map((limit, i) => ({
+      name: `within ${limit} ${state.unit}`,
+      color: LEVELS[i % LEVELS.length],
+      points: state.series.levels.map(([n, within]) => [n, within[i]]),
+    }));
+    const last = state.series.levels[state.series.levels.length - 1];
+    const text = last
+      ? state.thresholds.map((limit, i) => `≤ ${limit} ${state.unit}: ${fmt(100 * last[1][i], 3)} %`).join(" · ")
+      : "";
+    this.levels.update({ series, label: `Service levels, recent window; ${text}`, empty: "no targets yet" });
+    this.levels.readout.textContent = text;
+    this.levels.readout.dataset.within = last ? last[1].join(",") : "";
   }
 
   renderCost(state) {

@@ -1,14 +1,27 @@
 /**
- * Draws a FleetState on the map: vehicles (coloured by type), their trails,
- * and the recent targets with a line to each vehicle that served them.
+ * Draws a FleetState on the map: vehicles at their current positions, filled
+ * by status and ringed by type, each tied by a thin line to its reference (a
+ * small square: where it waits when idle, what learning moves), the trails of
+ * the references, the recent targets with a line to each reference that served
+ * them, and the latest target's dispatch: a line to each vehicle sent.
  *
  * Every vehicle is a <circle class="vehicle" data-vehicle=ID data-type=T
- * data-x=X data-y=Y> whose data-x/data-y are its reference position in network
- * coordinates, exactly as the API reports it; every target is a
- * <g class="target" data-seq data-x data-y data-requires data-served-by data-moved>.
+ * data-status=S data-x=X data-y=Y data-cx=CX data-cy=CY> whose data-x/data-y
+ * are its reference and data-cx/data-cy its current position, in network
+ * coordinates, exactly as the API reports them; its reference is a
+ * <rect class="reference" data-vehicle=ID> and the tie a <line class="anchor">.
+ * Every target is a <g class="target" data-seq data-x data-y data-requires
+ * data-served-by data-moved>; a dispatch line is a
+ * <line class="dispatch" data-target=SEQ data-vehicle=ID>.
  */
 
 import { svgEl, withTitle } from "./svg.js";
+
+export const STATUS_COLORS = new Map([
+  ["available", "#1b7f3b"],
+  ["busy", "#e67e22"],
+  ["offline", "#8a8f98"],
+]);
 
 export class FleetLayer {
   /** @param {import("./map.js").NetworkMap} map */
@@ -17,6 +30,8 @@ export class FleetLayer {
     this.circles = new Map();
     this.trails = new Map();
     this.colors = new Map();
+    this.anchors = new Map();
+    this.references = new Map();
   }
 
   /** Start drawing a new fleet. */
@@ -24,12 +39,16 @@ export class FleetLayer {
     this.map.clearOverlays();
     this.circles.clear();
     this.trails.clear();
+    this.anchors.clear();
+    this.references.clear();
     this.colors = colors;
-    const { trails, vehicles } = this.map.layers;
+    const { trails, vehicles, anchors } = this.map.layers;
     for (const v of state.vehicles.values()) {
       const color = colors.get(v.type);
       this.trails.set(v.id, svgEl("polyline", { class: "trail", "data-trail": v.id, stroke: color }, trails));
-      const circle = svgEl("circle", { class: "vehicle", "data-vehicle": v.id, "data-type": v.type, fill: color }, vehicles);
+      this.anchors.set(v.id, svgEl("line", { class: "anchor", "data-vehicle": v.id, stroke: color }, anchors));
+      this.references.set(v.id, svgEl("rect", { class: "reference", "data-vehicle": v.id, fill: color }, anchors));
+      const circle = svgEl("circle", { class: "vehicle", "data-vehicle": v.id, "data-type": v.type, stroke: color }, vehicles);
       this.circles.set(v.id, circle);
     }
     this.render(state);
@@ -41,17 +60,53 @@ export class FleetLayer {
       const v = state.vehicles.get(id);
       const circle = this.circles.get(id);
       if (!v || !circle) continue;
-      circle.setAttribute("cx", String(v.x));
-      circle.setAttribute("cy", String(-v.y));
+      circle.setAttribute("cx", String(v.cx));
+      circle.setAttribute("cy", String(-v.cy));
+      circle.setAttribute("fill", STATUS_COLORS.get(v.status) || "#1d2330");
       circle.dataset.x = String(v.x);
       circle.dataset.y = String(v.y);
+      circle.dataset.cx = String(v.cx);
+      circle.dataset.cy = String(v.cy);
+      circle.dataset.status = v.status;
       circle.dataset.updates = String(v.updates);
-      withTitle(circle, `${v.id} · type ${v.type} · ${v.updates} updates · (${v.x.toFixed(1)}, ${v.y.toFixed(1)})`);
+      withTitle(
+        circle,
+        `${v.id} · type ${v.type} · ${v.status} at (${v.cx.toFixed(1)}, ${v.cy.toFixed(1)}) · ` +
+          `reference (${v.x.toFixed(1)}, ${v.y.toFixed(1)}) · ${v.updates} updates`,
+      );
+      const anchor = this.anchors.get(id);
+      anchor.setAttribute("x1", String(v.cx));
+      anchor.setAttribute("y1", String(-v.cy));
+      anchor.setAttribute("x2", String(v.x));
+      anchor.setAttribute("y2", String(-v.y));
+      anchor.classList.toggle("away", !v.atReference);
+      const reference = this.references.get(id);
+      reference.setAttribute("x", String(v.x));
+      reference.setAttribute("y", String(-v.y));
       this.trails.get(id).setAttribute("points", v.trail.map(([x, y]) => `${x},${-y}`).join(" "));
     }
     state.dirty.clear();
     for (const [id, circle] of this.circles) circle.classList.toggle("moved", id === state.lastMoved);
     this.renderTargets(state);
+    this.renderDispatch(state);
+  }
+
+  /** Lines from the newest target to the vehicles it dispatched, at their current positions. */
+  renderDispatch(state) {
+    const layer = this.map.layers.dispatch;
+    layer.replaceChildren();
+    const d = state.lastDispatch;
+    if (!d) return;
+    layer.dataset.status = d.status;
+    layer.dataset.target = String(d.seq);
+    for (const s of d.sent) {
+      const line = svgEl(
+        "line",
+        { class: "dispatch", x1: d.x, y1: -d.y, x2: s.x, y2: -s.y, "data-target": d.seq, "data-vehicle": s.id },
+        layer,
+      );
+      withTitle(line, `target #${d.seq}: ${s.id} sent (${s.cost.toFixed(1)} ${state.unit})`);
+    }
   }
 
   renderTargets(state) {

@@ -27,7 +27,9 @@ export class NetworkMap {
     this.edges = svg.querySelector("#edges");
     this.layers = {
       trails: svg.querySelector("#layer-trails"),
+      anchors: svg.querySelector("#layer-anchors"),
       links: svg.querySelector("#layer-links"),
+      dispatch: svg.querySelector("#layer-dispatch"),
       targets: svg.querySelector("#layer-targets"),
       vehicles: svg.querySelector("#layer-vehicles"),
       pending: svg.querySelector("#layer-pending"),

@@ -8,6 +8,12 @@
  * live and are applied in order. Applying a target event sets the vehicles the
  * backward probe moved to their `backed_off` positions and the moved vehicle to
  * the event's `new_position`, so seeing an event twice is harmless.
+ *
+ * Each vehicle has two places: its reference (x, y), what learning moves, and
+ * its current position (cx, cy) with its status, set by `vehicle_state` events
+ * (a vehicle at its reference follows it). The latest target's dispatch answer
+ * (who was sent from where) is kept for drawing, and the service levels of
+ * every metrics message make a series.
  */
 
 export const TRAIL_POINTS = 40;
@@ -38,6 +44,10 @@ export class FleetState {
         speed: v.speed,
         x: v.position.x,
         y: v.position.y,
+        status: v.status ?? "available",
+        cx: (v.current ?? v.position).x,
+        cy: (v.current ?? v.position).y,
+        atReference: v.at_reference ?? true,
         updates: metrics.updates[v.id] ?? v.updates,
         trail: [],
       });
@@ -49,12 +59,15 @@ export class FleetState {
     this.window = metrics.recent_window;
     this.recentCosts = [];
     this.recentTargets = [];
-    this.series = { mean: [], recent: [], step: [], expected: [] };
+    this.series = { mean: [], recent: [], step: [], expected: [], levels: [] };
+    this.thresholds = fleet.service_thresholds || [];
+    this.lastDispatch = null;
     this.metrics = metrics;
     this.lastMoved = null;
     this.deleted = false;
     this.dirty = new Set(this.vehicles.keys());
     this.noteExpected(metrics);
+    this.noteLevels(metrics);
   }
 
   get unit() {
@@ -97,6 +110,7 @@ export class FleetState {
         this.addTrailPoint(mover, r.new_position.x, r.new_position.y);
       }
       this.rememberTarget(event.seq, r);
+      this.rememberDispatch(event.seq, r);
     });
     this.recentCosts = window;
     for (const v of this.vehicles.values()) this.addTrailPoint(v, v.x, v.y);
@@ -145,6 +159,10 @@ export class FleetState {
       this.deleted = true;
       return true;
     }
+    if (event.kind === "vehicle_state" && event.result) {
+      for (const changed of event.result.vehicles) this.applyVehicleState(changed);
+      return true;
+    }
     if (event.kind !== "target" || !event.result) return true;
     const r = event.result;
     this.targets += 1;
@@ -168,13 +186,49 @@ export class FleetState {
       mover.x = r.new_position.x;
       mover.y = r.new_position.y;
       mover.updates += 1;
+      if (mover.atReference) {
+        mover.cx = mover.x;
+        mover.cy = mover.y;
+      }
       this.addTrailPoint(mover, mover.x, mover.y);
       this.dirty.add(mover.id);
       push(this.series.step, [n, r.step_size, mover.type], SERIES_POINTS);
     }
     this.lastMoved = r.moved;
     this.rememberTarget(event.seq, r);
+    this.rememberDispatch(event.seq, r);
     return true;
+  }
+
+  /** A vehicle as a `vehicle_state` event's result shows it. */
+  applyVehicleState(changed) {
+    const v = this.vehicles.get(changed.id);
+    if (!v) return;
+    v.status = changed.status;
+    v.cx = changed.current.x;
+    v.cy = changed.current.y;
+    v.atReference = changed.at_reference;
+    this.dirty.add(v.id);
+  }
+
+  /** Keep the dispatch answer of the newest target: lines from it to the vehicles sent. */
+  rememberDispatch(seq, r) {
+    if (!r.dispatch) return;
+    const sent = r.dispatch.vehicles.map((s) => {
+      const v = this.vehicles.get(s.vehicle);
+      return { id: s.vehicle, x: v ? v.cx : r.target.x, y: v ? v.cy : r.target.y, cost: s.cost };
+    });
+    this.lastDispatch = { seq, x: r.target.x, y: r.target.y, status: r.dispatch.status, sent };
+  }
+
+  /** One point of the service-level series: the recent window's fraction within each threshold. */
+  noteLevels(metrics) {
+    const levels = metrics.service_levels;
+    if (!levels || !levels.recent.targets) return;
+    this.thresholds = levels.thresholds;
+    const last = this.series.levels[this.series.levels.length - 1];
+    if (last && last[0] === metrics.targets) return;
+    push(this.series.levels, [metrics.targets, levels.recent.within], SERIES_POINTS);
   }
 
   /** Apply an `event: metrics` message (authoritative counts when it is current). */
@@ -192,6 +246,7 @@ export class FleetState {
       }
     }
     this.noteExpected(metrics);
+    this.noteLevels(metrics);
   }
 
   noteExpected(metrics) {
