@@ -158,7 +158,7 @@ def test_bad_requests_get_problems(start_server: StartServer, connect: Connect) 
     for bad in [b"x1", "²".encode("latin-1"), b"-3", b"1.5"]:
         r = httpx.get(server.url + "/v1/fleets/f1/stream", headers={b"Last-Event-ID": bad})
         assert r.status_code == 422
-        assert "Last-Event-ID" in r.json()["detail"]
+        assert "last-event-id" in r.json()["detail"].lower()  # header names are case-blind
     negative = httpx.get(server.url + "/v1/fleets/f1/stream", params={"after": -1})
     assert negative.status_code == 422
 
