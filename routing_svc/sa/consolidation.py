@@ -94,6 +94,10 @@ class ConsolidationPolicy:
     fresh_baseline : bool
         The shift test's baseline is :attr:`Consolidation.fresh_baseline` (the cost of
         targets the references were not fitted to), else :attr:`Consolidation.baseline`.
+    checked_moves : bool
+        A held step that would move a reference is taken only if it lowers the
+        reservoir's mean cost (:func:`move_pays`), so that a jump of ``J`` that the
+        step's direction does not see is never paid blindly.
     """
 
     reservoir: int = 4000
@@ -106,6 +110,7 @@ class ConsolidationPolicy:
     shift_ratio: float = 1.25
     refit: float | None = 1.5
     fresh_baseline: bool = True
+    checked_moves: bool = True
 
     def __post_init__(self) -> None:
         for name in ("reservoir", "first", "longest", "block", "folds"):
@@ -127,8 +132,9 @@ class ConsolidationPolicy:
             and self.refit > 1.0
         ):
             raise InvalidInput("consolidation refit must be a finite number > 1, or null")
-        if not isinstance(self.fresh_baseline, bool):
-            raise InvalidInput("consolidation fresh_baseline must be true or false")
+        for flag in ("fresh_baseline", "checked_moves"):
+            if not isinstance(getattr(self, flag), bool):
+                raise InvalidInput(f"consolidation {flag} must be true or false")
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -140,21 +146,23 @@ class ConsolidationPolicy:
             "confidence": self.confidence,
             "block": self.block,
             "shift_ratio": self.shift_ratio,
-            # a policy of the behaviour before these two stores the bytes it had then
+            # a policy of the behaviour before these three stores the bytes it had then
             **({} if self.refit is None else {"refit": self.refit}),
             **({"fresh_baseline": True} if self.fresh_baseline else {}),
+            **({"checked_moves": True} if self.checked_moves else {}),
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> ConsolidationPolicy:
-        """A stored policy; one stored without ``refit`` or ``fresh_baseline`` keeps the
-        behaviour it was stored with (no refit, the reservoir's baseline)."""
+        """A stored policy; one stored without ``refit``, ``fresh_baseline`` or
+        ``checked_moves`` keeps the behaviour it was stored with (no refit, the
+        reservoir's baseline, unchecked moves)."""
         if not isinstance(data, dict):
             raise InvalidInput("consolidation must be an object")
-        unknown = set(data) - {*cls().to_dict(), "refit", "fresh_baseline"}
+        unknown = set(data) - {*cls().to_dict(), "refit", "fresh_baseline", "checked_moves"}
         if unknown:
             raise InvalidInput(f"unknown consolidation fields: {sorted(unknown)}")
-        return cls(**{"refit": None, "fresh_baseline": False, **data})
+        return cls(**{"refit": None, "fresh_baseline": False, "checked_moves": False, **data})
 
     def next_after(self, *, now: int, epoch: int) -> int:
         """The target count of the next consolidation after one at ``now``."""
@@ -379,6 +387,54 @@ def consolidate(
         standard_error,
         fresh_before,
     )
+
+
+def move_pays(
+    space: SampleSpace[P],
+    positions: Sequence[P],
+    mover: int,
+    new: P,
+    sample: Sequence[P],
+    *,
+    power: float,
+    speed: float,
+) -> bool:
+    """Whether moving reference ``mover`` to ``new`` lowers the sample's mean cost.
+
+    The empirical objective (11) of the fleet on ``sample`` (each target served by
+    its closest reference) with the move against without it; an empty sample
+    cannot judge, and the move is taken.
+
+    Parameters
+    ----------
+    space : SampleSpace
+        The space.
+    positions : sequence
+        The current references.
+    mover : int
+        The index of the reference that would move.
+    new : position
+        Where it would move.
+    sample : sequence
+        The targets that judge (the reservoir).
+    power, speed : float
+        As in :func:`consolidate`.
+    """
+    if not sample:
+        return True
+    counts: dict[P, int] = {}
+    for z in sample:
+        counts[z] = counts.get(z, 0) + 1
+    targets = list(counts)
+    weight = np.fromiter(counts.values(), dtype=np.float64, count=len(targets))
+    costs = np.asarray(space.cost_matrix([*positions, new], targets), dtype=np.float64) / speed
+    costs = costs**power
+    p = len(positions)
+    others = np.delete(costs[:p], mover, axis=0)
+    rest = others.min(axis=0) if others.shape[0] else np.full(len(targets), np.inf)
+    before = float(weight @ np.minimum(rest, costs[mover]))
+    after = float(weight @ np.minimum(rest, costs[p]))
+    return after < before
 
 
 def _distinct(rows: IntArray, n_sites: int) -> IntArray:

@@ -49,6 +49,7 @@ from routing_svc.sa.consolidation import (
     ConsolidationPolicy,
     SampleSpace,
     consolidate,
+    move_pays,
 )
 from routing_svc.sa.held_step import Hold, JunctionSpace, held_step
 from routing_svc.sa.live import (
@@ -524,8 +525,10 @@ class Fleet(Generic[P]):
         recorded: Consolidation[P] | None = None,
     ) -> Outcome[P]:
         """:meth:`observe` under the ``consolidating`` rule: the held step of the mover
-        (:func:`~routing_svc.sa.held_step.held_step`), then the shift test and, when due,
-        a consolidation (``recorded``: apply that one instead of solving)."""
+        (:func:`~routing_svc.sa.held_step.held_step`; a move it would make is dropped,
+        with its pressure, unless :func:`~routing_svc.sa.consolidation.move_pays` on the
+        reservoir), then the shift test and, when due, a consolidation (``recorded``:
+        apply that one instead of solving)."""
         dispatch, found = self._search(target, requires)
         state = self.state
         mover = found.mover
@@ -547,6 +550,18 @@ class Fleet(Generic[P]):
                 hold=learning.holds[mover],
                 window=self.config.window,
             )
+            if moved > 0.0 and policy.checked_moves and self._consolidates():
+                positions = state.positions
+                if not move_pays(
+                    cast(SampleSpace[P], space),
+                    positions,
+                    mover,
+                    new,
+                    list(learning.reservoir),
+                    power=self.config.objective.power,
+                    speed=float(self._speeds[mover]),
+                ):
+                    new, moved, hold = old, 0.0, None
             learning.holds[mover] = hold
         else:
             new = space.advance(old, target, found.route, amount) if amount > 0.0 else old

@@ -628,16 +628,25 @@ def test_policy_round_trip() -> None:
             shift_ratio=1.5,
             refit=3.0,
             fresh_baseline=False,
+            checked_moves=False,
         ),
         ConsolidationPolicy(refit=None),
     ):
         data = json.loads(json.dumps(policy.to_dict()))
         assert ConsolidationPolicy.from_dict(data) == policy
-    # a policy stored before refit and the fresh baseline keeps the behaviour it had
+    # a policy stored before refit, the fresh baseline and checked moves keeps the
+    # behaviour it had
     assert ConsolidationPolicy.from_dict({}) == ConsolidationPolicy(
-        refit=None, fresh_baseline=False
+        refit=None, fresh_baseline=False, checked_moves=False
     )
-    for wrong in ({"refit": 1.0}, {"refit": True}, {"refit": "2"}, {"fresh_baseline": 1}):
+    wrongs: list[dict[str, Any]] = [
+        {"refit": 1.0},
+        {"refit": True},
+        {"refit": "2"},
+        {"fresh_baseline": 1},
+        {"checked_moves": "yes"},
+    ]
+    for wrong in wrongs:
         with pytest.raises(InvalidInput):
             ConsolidationPolicy.from_dict(wrong)
     with pytest.raises(InvalidInput):
@@ -708,7 +717,7 @@ def test_policy_defaults() -> None:
         0.0,
         1.25,
     )
-    assert (policy.refit, policy.fresh_baseline) == (1.5, True)
+    assert (policy.refit, policy.fresh_baseline, policy.checked_moves) == (1.5, True, True)
 
 
 Run = tuple[list[NetPosition], Fleet[NetPosition], list[Any]]
@@ -1125,3 +1134,81 @@ def test_more_folds_test_the_same_fresh_targets(space: RoadSpace) -> None:
         )  # fmt: skip
         assert done.accepted  # a poor start loses to any refit
         assert done.gain < 0.0 < done.standard_error
+
+
+# -- checked held moves ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("power", [1.0, 2.0])
+def test_move_pays_is_the_sign_of_the_sample_objective_change(
+    space: RoadSpace, power: float
+) -> None:
+    rng = np.random.default_rng(5)
+    _, sample = demand_stream(3, 60)
+    decided = set()
+    for _ in range(40):
+        edges = rng.choice(NET.n_edges, size=4, replace=False)
+        positions = [NetPosition(int(e), 0.0) for e in edges]
+        mover = int(rng.integers(4))
+        new = (
+            sample[int(rng.integers(len(sample)))]
+            if rng.random() < 0.5
+            else NetPosition(int(rng.integers(NET.n_edges)), 0.0)
+        )
+        moved = [*positions]
+        moved[mover] = new
+        before = sample_objective(space, positions, sample, power, 2.0)
+        after = sample_objective(space, moved, sample, power, 2.0)
+        pays = consolidation_module.move_pays(
+            space, positions, mover, new, sample, power=power, speed=2.0
+        )
+        assert pays == (after < before * (1 - 1e-12))
+        decided.add(pays)
+    assert decided == {True, False}
+    # nothing to judge by: the move is taken
+    assert consolidation_module.move_pays(
+        space, [NetPosition(0, 0.0)], 0, NetPosition(1, 0.0), [], power=1.0, speed=1.0
+    )
+
+
+def held_moves(space: RoadSpace, policy: ConsolidationPolicy) -> list[tuple[float, float]]:
+    """A fleet with large held steps from a poor start: the reservoir's cost before and
+    after every held move it makes between consolidations (after its first target: an
+    empty reservoir judges nothing)."""
+    config = learning_config(
+        "consolidating",
+        typical_cost=space.typical_cost(),
+        n_vehicles=4,
+        objective=ROUTING,
+        consolidation=policy,
+        step_scale=0.5,
+    )
+    starts = [NetPosition(50 * i, 0.0) for i in range(4)]
+    fleet = Fleet.create(space, [(Vehicle(f"v{i}"), p) for i, p in enumerate(starts)], config)
+    _, stream = demand_stream(11, 1500)
+    out = []
+    for k, z in enumerate(stream):
+        before = list(fleet.positions.values())
+        outcome = fleet.observe(z)
+        moved = outcome.new_position != outcome.old_position
+        if k > 0 and moved and outcome.consolidation is None:
+            reservoir = stream[max(0, k - policy.reservoir) : k]
+            after = list(fleet.positions.values())
+            out.append(
+                (
+                    sample_objective(space, before, reservoir, 1.0),
+                    sample_objective(space, after, reservoir, 1.0),
+                )
+            )
+    return out
+
+
+def test_a_held_move_is_taken_only_where_it_lowers_the_reservoirs_cost(space: RoadSpace) -> None:
+    # without the check, some held moves raise the cost of the recent targets (the jump of J
+    # that the step's direction does not see); with it, none does
+    calm = {"reservoir": 400, "first": 200, "shift_ratio": 1e9}
+    unchecked = held_moves(space, ConsolidationPolicy(**calm, checked_moves=False))
+    assert any(after > before for before, after in unchecked)
+    checked = held_moves(space, ConsolidationPolicy(**calm))
+    assert checked
+    assert all(after < before for before, after in checked)
