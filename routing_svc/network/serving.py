@@ -12,13 +12,15 @@ search also prices the probes from the labels it computed (a probe matters
 only if it arrives before the fleet, and the fleet's search has settled every
 class such a probe can be on; see :func:`~routing_svc.network.search.nearest_vehicles`).
 
-It does exactly the arithmetic of those methods, in the same order (every
-comparison, every sum), so a fleet gives bit-identical positions either way
-(the gradient step of eqs. (9)-(10) and the probe's back-offs);
-``tests/network/test_network_serving.py`` checks that against the methods
-themselves over thousands of targets. Whatever it does not cover (a
-requirement of several types, annealing noise, a search that reports an
-error) is left to them.
+The rule is not written twice. The step of eqs. (9)-(10) and the probe's gain
+and step are the plain functions of :mod:`routing_svc.sa.step_rule`, compiled
+here as they are; the moves (the back probe, the back-off, the walk on one edge,
+the entry behind a move) are the kernels of :mod:`routing_svc.network.moves`,
+which :class:`RoadSpace` calls too. So a fleet gives bit-identical positions
+either way; ``tests/network/test_network_serving.py`` checks that over
+thousands of targets. Whatever this call does not cover (a requirement of
+several types, annealing noise, a search that reports an error) is left to the
+methods.
 """
 
 from __future__ import annotations
@@ -29,6 +31,14 @@ from numba import njit
 from routing_svc.network.columns import changed_rows, write_rows
 from routing_svc.network.compile import CompiledNetwork
 from routing_svc.network.costs import EdgeCosts, check_position
+from routing_svc.network.moves import (
+    ENTRY_FOUND,
+    ENTRY_ON_ROUTE_START,
+    back_off_point,
+    entry_behind,
+    probe_point,
+    walk_one_edge,
+)
 from routing_svc.network.search import (
     STATUS_OK,
     ArcArray,
@@ -38,6 +48,7 @@ from routing_svc.network.search import (
 from routing_svc.network.twins import set_twins
 from routing_svc.network.walking import walk_spend
 from routing_svc.sa.space import Served
+from routing_svc.sa.step_rule import probe_gains, probe_step, step_amount
 from routing_svc.types import FloatArray, Int32Array, IntArray, NetPosition
 
 __all__ = ["FleetUpdate", "refresh_probes", "serve_one"]
@@ -59,17 +70,9 @@ Work = tuple[FloatArray, Int32Array, Int32Array, FloatArray, Int32Array, Int32Ar
 (:class:`~routing_svc.network.search.SearchBuffers`)."""
 
 
-@njit(cache=True)
-def _probe_of(
-    rate: FloatArray, window: float, edge: int, offset: float, entry_edge: int, entry_offset: float
-) -> tuple[int, float]:
-    """One back probe, as :meth:`RoadSpace.back_probes` places it."""
-    edge_rate = rate[edge]
-    if offset * edge_rate > window:
-        return edge, offset - window / edge_rate
-    if entry_edge >= 0:
-        return entry_edge, entry_offset
-    return edge, 0.0
+_step_amount = njit(cache=True)(step_amount)
+_probe_gains = njit(cache=True)(probe_gains)
+_probe_step = njit(cache=True)(probe_step)
 
 
 @njit(cache=True)
@@ -89,7 +92,7 @@ def refresh_probes(
 ) -> None:
     """Rewrite the back probes (and their twins) of the vehicles ``rows``."""
     for i in rows:
-        e, s = _probe_of(rate, window, veh_edge[i], veh_offset[i], entry_edge[i], entry_offset[i])
+        e, s = probe_point(rate, window, veh_edge[i], veh_offset[i], entry_edge[i], entry_offset[i])
         probe_edge[i] = e
         probe_offset[i] = s
     if either_way:
@@ -128,13 +131,6 @@ def _path_cost(
 
 
 @njit(cache=True)
-def _branches(fwd_indptr: Int32Array, rev: IntArray, either_way: bool, edge: int) -> bool:
-    """:meth:`RoadSpace._branches`: two turns at the end of ``edge``, or its twin."""
-    turns = fwd_indptr[edge + 1] - fwd_indptr[edge]
-    return turns > 1 or (either_way and rev[edge] >= 0)
-
-
-@njit(cache=True)
 def serve_one(
     road: Road,
     work: Work,
@@ -152,7 +148,6 @@ def serve_one(
     gammas: FloatArray,
     power: float,
     window: float,
-    tolerance: float,
     either_way: bool,
     backed: IntArray,
 ) -> tuple[int, int, int, float, float, float, int, bool]:
@@ -196,33 +191,19 @@ def serve_one(
     mover = int(found[6][mover_slot])
     completion = found[4][mover_slot]
     mover_cost = found[5][mover_slot]
-    mover_speed = speed[mover]
-    gamma = gammas[mover]
-    if power == 1.0:  # Objective.step_amount
-        amount = gamma / mover_speed
-    else:
-        amount = gamma * (mover_cost / mover_speed) ** (power - 1.0) / mover_speed
-    amount = min(mover_cost, amount)
+    amount = _step_amount(gammas[mover], mover_cost, speed[mover], power)
     rows = np.empty(1, dtype=np.int64)
 
     n_backed = 0
     if probing:  # Fleet._probe; only probes that arrive before the fleet count
-        bar = tolerance * completion
         for j in range(n):
-            if not times[j] < completion:
+            if not _probe_gains(times[j], completion):
                 continue
-            gain = completion - times[j]
-            if gain <= bar:
-                continue
-            step = min(window, gammas[j] * gain / window)
-            e, s = veh_edge[j], veh_offset[j]  # RoadSpace.back_off
-            edge_rate = rate[e]
-            if probe_edge[j] == e:
-                moved_e, moved_s = e, max(probe_offset[j], s - step / edge_rate)
-            elif step >= s * edge_rate:
-                moved_e, moved_s = probe_edge[j], probe_offset[j]
-            else:
-                moved_e, moved_s = e, s - step / edge_rate
+            step = _probe_step(gammas[j], completion - times[j], window)
+            e = veh_edge[j]
+            moved_e, moved_s = back_off_point(
+                rate, e, veh_offset[j], probe_edge[j], probe_offset[j], step
+            )
             if moved_e != e:  # RoadSpace.entry without a route: unknown on another edge
                 entry_edge[j] = _NO_EDGE
                 entry_offset[j] = 0.0
@@ -248,11 +229,7 @@ def serve_one(
         if either_way and route[0] != e and veh_edge[n + mover] == route[0]:
             e, s = veh_edge[n + mover], veh_offset[n + mover]
         if route.shape[0] == 1:  # walk_route
-            t_rate = rate[target_edge]
-            if amount >= (target_offset - s) * t_rate:
-                reached = True
-            else:
-                new_e, new_s = target_edge, min(s + amount / t_rate, target_offset)
+            reached, new_s = walk_one_edge(rate, target_edge, s, target_offset, amount)
         else:
             k, at = walk_spend(length, cost, rate, route, s, target_offset, amount)
             if k < 0:
@@ -298,27 +275,18 @@ def _move_entry(
     _, _, _, fwd_indptr, length, cost, rate, rev = road
     if new_e == old_e and new_s >= old_s:
         return
-    k = 0
-    for j in range(route.shape[0] - 1, 0, -1):
-        if route[j] == new_e:
-            k = j
-            break
-    if k == 0:
+    how, best = entry_behind(
+        fwd_indptr, rev, either_way, length, cost, rate, route, new_e, new_s, window
+    )
+    if how == ENTRY_ON_ROUTE_START:
         if new_e != old_e:
             entry_edge[i] = _NO_EDGE
             entry_offset[i] = 0.0
         return
-    behind = new_s * rate[new_e]
-    best = _NO_EDGE
-    for j in range(k - 1, -1, -1):
-        edge = route[j]
-        if _branches(fwd_indptr, rev, either_way, edge) and (best < 0 or behind <= window):
-            best = edge
-        if behind > window and best >= 0:
-            entry_edge[i] = best
-            entry_offset[i] = length[best]
-            return
-        behind += cost[edge]
+    if how == ENTRY_FOUND:
+        entry_edge[i] = best
+        entry_offset[i] = length[best]
+        return
     if entry_edge[i] >= 0:
         to_previous = _path_cost(
             road, work, either_way, entry_edge[i], entry_offset[i], new_e, new_s
@@ -440,7 +408,6 @@ class FleetUpdate:
         entries: list[NetPosition | None],
         gammas: FloatArray,
         power: float,
-        tolerance: float,
     ) -> Served[NetPosition] | None:
         """Serve ``target`` (checked to lie on the network) and move the fleet in place.
 
@@ -454,7 +421,7 @@ class FleetUpdate:
             self._road, self._work,
             target.edge, target.offset, veh_edge, veh_offset, self._speed, self._anyone,
             self._one, self._probe_edge, self._probe_offset,
-            entry_edge, entry_offset, gammas, power, self.window, tolerance, self.either_way,
+            entry_edge, entry_offset, gammas, power, self.window, self.either_way,
             self._backed,
         )  # fmt: skip
         if status != STATUS_OK:

@@ -25,6 +25,14 @@ from routing_svc.network.costs import (
     check_position,
     cost_matrix,
 )
+from routing_svc.network.moves import (
+    ENTRY_FOUND,
+    ENTRY_ON_ROUTE_START,
+    NO_ROUTE,
+    back_off_point,
+    entry_behind,
+    probe_point,
+)
 from routing_svc.network.search import (
     STATUS_BAD_COUNTS,
     STATUS_BAD_GROUP,
@@ -357,7 +365,7 @@ class RoadSpace:
         else (entry unknown) the start of its edge.
         """
         network = self.network
-        rate = self._costs.rate_values
+        rate = self._costs.rate
         length = network.length_values
         n_edges = len(length)
         probes: list[NetPosition] = []
@@ -370,21 +378,23 @@ class RoadSpace:
                 and 0.0 <= offset <= length[edge]
             ):
                 check_position(network, position, what="position")
-            edge_rate = rate[edge]
-            if offset * edge_rate > window:
-                probes.append(NetPosition(edge, offset - window / edge_rate))
-            else:
-                probes.append(entry if entry is not None else NetPosition(edge, 0.0))
+            at, behind = probe_point(
+                rate,
+                window,
+                edge,
+                offset,
+                -1 if entry is None else entry.edge,
+                0.0 if entry is None else entry.offset,
+            )
+            probes.append(NetPosition(int(at), float(behind)))
         return probes
 
     def back_off(self, position: NetPosition, probe: NetPosition, amount: float) -> NetPosition:
         """Move ``position`` a cost ``amount`` back toward its probe, not past it."""
-        rate = float(self._costs.rate[position.edge])
-        if probe.edge == position.edge:
-            return NetPosition(position.edge, max(probe.offset, position.offset - amount / rate))
-        if amount >= position.offset * rate:
-            return probe
-        return NetPosition(position.edge, position.offset - amount / rate)
+        edge, offset = back_off_point(
+            self._costs.rate, position.edge, position.offset, probe.edge, probe.offset, amount
+        )
+        return NetPosition(int(edge), float(offset))
 
     def entry(
         self,
@@ -399,8 +409,9 @@ class RoadSpace:
         For a reference moved from ``old`` to ``new`` along ``route`` (``None``
         for a move without one), with ``previous`` the entry of ``old``. An
         entry is the end of an edge where the reference had a choice
-        (:meth:`_branches`; ends of edges with a single turn reach exactly what
-        the start of the next edge reaches, so they are skipped): the farthest
+        (:func:`~routing_svc.network.moves.branches`; ends of edges with a single
+        turn reach exactly what the start of the next edge reaches, so they are
+        skipped): the farthest
         such junction within a cost ``window`` behind ``new`` along the route,
         or ``previous`` when still within it, else the nearest one behind.
 
@@ -411,19 +422,24 @@ class RoadSpace:
         """
         if new.edge == old.edge and new.offset >= old.offset:
             return previous
-        path = route.tolist() if isinstance(route, np.ndarray) else []
-        k = next((k for k in range(len(path) - 1, 0, -1) if path[k] == new.edge), 0)
-        if k == 0:
-            return previous if new.edge == old.edge else None
         net, costs = self.network, self._costs
-        behind = new.offset * float(costs.rate[new.edge])
-        best: NetPosition | None = None
-        for edge in reversed(path[:k]):
-            if self._branches(edge) and (best is None or behind <= window):
-                best = NetPosition(edge, float(net.length[edge]))
-            if behind > window and best is not None:
-                return best
-            behind += float(costs.cost[edge])
+        how, edge = entry_behind(
+            net.fwd_indptr,
+            reverse_edges(net),
+            self.either_way,
+            net.length,
+            costs.cost,
+            costs.rate,
+            route if isinstance(route, np.ndarray) else NO_ROUTE,
+            new.edge,
+            new.offset,
+            window,
+        )
+        if how == ENTRY_ON_ROUTE_START:
+            return previous if new.edge == old.edge else None
+        best = None if edge < 0 else NetPosition(int(edge), float(net.length[edge]))
+        if how == ENTRY_FOUND:
+            return best
         if previous is not None:
             try:
                 if self.path_cost(previous, new) <= window or best is None:
@@ -431,12 +447,6 @@ class RoadSpace:
             except Unreachable:
                 pass
         return best
-
-    def _branches(self, edge: int) -> bool:
-        """Whether a reference at the end of ``edge`` has a choice: two turns, or its twin."""
-        net = self.network
-        turns = int(net.fwd_indptr[edge + 1]) - int(net.fwd_indptr[edge])
-        return turns > 1 or (self.either_way and int(reverse_edges(net)[edge]) >= 0)
 
     def perturb(
         self, position: NetPosition, amount: float, rng: np.random.Generator

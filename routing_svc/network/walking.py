@@ -17,6 +17,7 @@ from numba import njit
 from routing_svc.errors import InvalidInput
 from routing_svc.network.compile import CompiledNetwork
 from routing_svc.network.costs import EdgeCosts
+from routing_svc.network.moves import walk_one_edge
 from routing_svc.types import FloatArray, Int32Array, IntArray, NetPosition
 
 __all__ = ["check_route", "random_walk", "walk_route", "walk_spend"]
@@ -160,10 +161,10 @@ def walk_route(
     spend = _check_amount(amount)
     rate = costs.rate
     if route.shape[0] == 1:
-        t_rate = rate[target.edge]
-        if spend >= (target.offset - position.offset) * t_rate:
-            return target
-        return NetPosition(target.edge, float(min(position.offset + spend / t_rate, target.offset)))
+        reached, offset = walk_one_edge(
+            rate, target.edge, float(position.offset), float(target.offset), spend
+        )
+        return target if reached else NetPosition(target.edge, float(offset))
     k, offset = walk_spend(
         network.length, costs.cost, rate, route, float(position.offset), float(target.offset), spend
     )

@@ -64,8 +64,8 @@ from routing_svc.sa.objectives import Objective
 from routing_svc.sa.requirements import build_requirement
 from routing_svc.sa.schedules import Counting, Schedule, schedule_from_dict
 from routing_svc.sa.space import DirectedSpace, P, Requirement, SingleTargetServing, Space
+from routing_svc.sa.step_rule import probe_gains, probe_step
 
-_TOLERANCE = 1e-9
 """Relative gain below which a probe is taken as no better (rounding of equal paths)."""
 
 
@@ -683,7 +683,6 @@ class Fleet(Generic[P]):
             state.entries,
             gammas,
             self.config.objective.power,
-            _TOLERANCE,
         )
         if done is None:
             return None
@@ -758,11 +757,11 @@ class Fleet(Generic[P]):
         probes = self._back_probes(space, window)
         # only a probe that arrives before the fleet matters: the search stops there
         times = space.arrival_times(target, probes, self._speeds, cost)
-        gains = cost - times
         backed_off: list[tuple[int, P]] = []
-        for j in np.flatnonzero(~(gains <= _TOLERANCE * cost)).tolist():
-            gain = float(gains[j])
-            amount = min(window, self.step_size(j) * gain / window)
+        for j, arrival in enumerate(times.tolist()):
+            if not probe_gains(arrival, cost):
+                continue
+            amount = probe_step(self.step_size(j), cost - arrival, window)
             moved = space.back_off(positions[j], probes[j], amount)
             entries[j] = space.entry(positions[j], moved, None, entries[j], window)
             positions[j] = moved

@@ -27,6 +27,7 @@ import math
 from dataclasses import dataclass
 
 from routing_svc.errors import InvalidInput
+from routing_svc.sa.step_rule import step_amount
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,11 +94,7 @@ class Objective:
             ``min(D, gamma * (D / v)**(power - 1) / v)``: eq. (10) for
             ``power = 1``, eq. (9) for ``power = 2``.
         """
-        if self.power == 1.0:
-            amount = gamma / speed
-        else:
-            amount = gamma * (path_cost / speed) ** (self.power - 1.0) / speed
-        return min(path_cost, amount)
+        return step_amount(gamma, path_cost, speed, self.power)
 
 
 ROUTING = Objective(1.0)

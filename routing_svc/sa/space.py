@@ -211,12 +211,11 @@ class SingleTargetServing(Protocol[P]):
         entries: list[P | None],
         gammas: FloatArray,
         power: float,
-        tolerance: float,
     ) -> Served[P] | None:
         """Serve ``target`` and update ``positions`` and ``entries`` in place.
 
         ``gammas[i]`` is vehicle ``i``'s step size for its next update, ``power``
-        the objective's ``q``, ``tolerance`` the probe's relative gain threshold.
+        the objective's ``q`` (the step of :mod:`routing_svc.sa.step_rule`).
         ``None`` when the search reports an error: nothing changed, and the
         fleet's own path raises it.
         """

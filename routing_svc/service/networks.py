@@ -50,7 +50,7 @@ class NetworkEntry:
         one = Requirement(np.zeros(1, dtype=np.int64), np.ones(1, dtype=np.int64))
         found = space.assign(here, [here], np.ones(1), one)
         space.advance(here, here, found.route, 0.0)
-        space.serving(np.ones(1), 1.0).serve(here, [here], [None], np.ones(1), 1.0, 0.0)
+        space.serving(np.ones(1), 1.0).serve(here, [here], [None], np.ones(1), 1.0)
         self.describe(here)
 
     def resolve(self, position: Position) -> NetPosition:

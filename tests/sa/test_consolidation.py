@@ -1206,9 +1206,10 @@ def held_moves(space: RoadSpace, policy: ConsolidationPolicy) -> list[tuple[floa
 def test_a_held_move_is_taken_only_where_it_lowers_the_reservoirs_cost(space: RoadSpace) -> None:
     # without the check, some held moves raise the cost of the recent targets (the jump of J
     # that the step's direction does not see); with it, none does
-    calm = {"reservoir": 400, "first": 200, "shift_ratio": 1e9}
-    unchecked = held_moves(space, ConsolidationPolicy(**calm, checked_moves=False))
+    unchecked = held_moves(
+        space, ConsolidationPolicy(reservoir=400, first=200, shift_ratio=1e9, checked_moves=False)
+    )
     assert any(after > before for before, after in unchecked)
-    checked = held_moves(space, ConsolidationPolicy(**calm))
+    checked = held_moves(space, ConsolidationPolicy(reservoir=400, first=200, shift_ratio=1e9))
     assert checked
     assert all(after < before for before, after in checked)
