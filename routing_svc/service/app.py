@@ -12,8 +12,6 @@ from typing import Any
 
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
-from starlette.middleware.errors import ServerErrorMiddleware
-from starlette.types import ASGIApp, Receive, Scope, Send
 
 from routing_svc import __version__
 from routing_svc.errors import Conflict, StorageError
@@ -21,7 +19,7 @@ from routing_svc.network.identity import file_bytes_sha256
 from routing_svc.service import fleet_gauges
 from routing_svc.service.deadline import RequestDeadline
 from routing_svc.service.demo import ensure_demo_fleet, feed_demo_targets
-from routing_svc.service.fastpath import TARGET_PATH, TargetFastPath
+from routing_svc.service.fastpath import TargetFastPath
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.guards import Guards
 from routing_svc.service.networks import NetworkEntry, NetworkRegistry
@@ -89,55 +87,6 @@ def rekey_legacy(log: EventLog, record: NetworkRecord, entry: NetworkEntry) -> N
     return log.rekey_network(record.id, old_sha256=record.sha256, new_sha256=identity)
 
 
-class ServiceApp(FastAPI):
-    """The FastAPI application, with a short way in for the hot route.
-
-    With :attr:`target_fast_path`, ``POST /v1/fleets/{id}/targets`` goes through
-    Starlette's server-error middleware, the application's own middleware (the
-    guards, CORS) and :class:`~routing_svc.service.fastpath.TargetFastPath`, and
-    skips the layers between (FastAPI's telemetry and body-limit wrappers), which
-    cost each request some microseconds and do nothing for it. What the fast
-    path passes on goes to the rest of the usual stack, without the middleware
-    it has already been through.
-    """
-
-    target_fast_path = False
-    _hot_route: ASGIApp | None = None
-
-    def build_middleware_stack(self) -> ASGIApp:
-        stack = super().build_middleware_stack()
-        if self.target_fast_path:
-            own = self.user_middleware
-            self.user_middleware = []
-            try:
-                rest = super().build_middleware_stack()
-            finally:
-                self.user_middleware = own
-            hot: ASGIApp = TargetFastPath(rest)
-            for cls, args, kwargs in reversed(own):
-                hot = cls(hot, *args, **kwargs)
-            handler = self.exception_handlers.get(500) or self.exception_handlers.get(Exception)
-            self._hot_route = ServerErrorMiddleware(hot, handler=handler, debug=self.debug)
-        return stack
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if (
-            self.target_fast_path
-            and scope["type"] == "http"
-            and scope["method"] == "POST"
-            and TARGET_PATH.fullmatch(scope["path"])
-        ):
-            if self.middleware_stack is None:
-                self.middleware_stack = self.build_middleware_stack()
-            assert self._hot_route is not None
-            if self.root_path:
-                scope["root_path"] = self.root_path
-            scope["app"] = self
-            await self._hot_route(scope, receive, send)
-            return
-        await super().__call__(scope, receive, send)
-
-
 def install_contract(app: FastAPI) -> None:
     """Serve the OpenAPI document with its problem answers made whole
     (:func:`~routing_svc.service.responses.complete_document`), built once."""
@@ -200,7 +149,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 await asyncio.to_thread(service.close)  # ... and the writer thread
             log.close()
 
-    app = ServiceApp(
+    app = FastAPI(
         title="routing_svc",
         version=__version__,
         summary="Keeps a vehicle fleet where it is needed (stochastic approximation).",
@@ -221,7 +170,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         dashboard.router,
     ):
         app.include_router(router)
-    app.target_fast_path = settings.target_fast_path  # inside the middleware added below
+    if settings.target_fast_path:  # the innermost of the middleware added here
+        app.add_middleware(TargetFastPath)
     app.add_middleware(
         RequestDeadline,
         timeout_s=settings.request_timeout_s,

@@ -1,16 +1,15 @@
 """The hot route ``POST /v1/fleets/{id}/targets`` served straight from the ASGI layer.
 
 A target's search and update are cheap next to FastAPI's request machinery
-(routing, dependency resolution, exception middleware, response classes);
-``bench/http_throughput.py`` measures the difference. This middleware sits
-directly inside the application's own middleware, the
-:class:`~routing_svc.service.guards.Guards` first (so the API key and the body
-limit apply unchanged), and :class:`~routing_svc.service.app.ServiceApp` sends
-the route to it past FastAPI's outer wrappers. It answers the common case
-itself: a valid body for a fleet that is in memory. It parses the body with the
-same pydantic model, queues it exactly like the FastAPI route
-(:func:`~routing_svc.service.routes.targets.submit_target`) and answers with
-the same bytes.
+(routing, dependency resolution, response classes); ``bench/http_throughput.py``
+measures the difference, head to head. :class:`TargetFastPath` is the
+innermost of the application's own middleware (``create_app`` adds it first),
+so the :class:`~routing_svc.service.guards.Guards` (API key, body limit) and the
+request deadline apply unchanged. It answers the common case itself: a valid
+body for a fleet that is in memory. It takes the route's rules from their one
+definition (:mod:`routing_svc.service.target_route`: the path, how a target is
+queued; :mod:`routing_svc.service.deps`: the key's bounds), parses the body with
+the same pydantic model and answers with the same bytes.
 
 Everything else goes on to the FastAPI route, with the body replayed: an
 invalid body or header, a fleet that must first be read from the database,
@@ -26,7 +25,6 @@ The route stays registered, so the OpenAPI document describes this path.
 from __future__ import annotations
 
 import asyncio
-import re
 
 from prometheus_client import Counter
 from pydantic import ValidationError
@@ -34,18 +32,14 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 from routing_svc.errors import RoutingSvcError
 from routing_svc.service.deadline import request_deadline
+from routing_svc.service.deps import usable_idempotency_key
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.guards import replaying
 from routing_svc.service.problems import error_problem, retry_after_of
-from routing_svc.service.routes.targets import TARGETS_APPLIED, submit_target
 from routing_svc.service.schemas import TargetSpec
-
-TARGET_PATH = re.compile(r"/v1/fleets/([^/]+)/targets")
-"""The path of the single-target route (matched in full)."""
+from routing_svc.service.target_route import TARGET_PATH, TARGETS_APPLIED, submit_target
 
 IDEMPOTENCY_HEADER = b"idempotency-key"
-MAX_IDEMPOTENCY_KEY = 200
-"""The route's limit on the ``Idempotency-Key`` header (longer keys are a 422 there)."""
 
 _JSON_HEADERS = (b"content-type", b"application/json")
 
@@ -65,9 +59,9 @@ class TargetFastPath:
         if scope["type"] != "http" or scope["method"] != "POST":
             await self.app(scope, receive, send)
             return
-        match = TARGET_PATH.fullmatch(scope["path"])
+        match = TARGET_PATH.match(scope["path"])
         service: FleetService | None = getattr(scope["app"].state, "fleets", None)
-        if match is None or service is None or not service.is_cached(match.group(1)):
+        if match is None or service is None or not service.is_cached(match["fleet_id"]):
             await self.app(scope, receive, send)
             return
         usable, key = _idempotency_key(scope)
@@ -85,7 +79,7 @@ class TargetFastPath:
             return
         try:
             loop = asyncio.get_running_loop()
-            queued = submit_target(service, match.group(1), target, key, loop)
+            queued = submit_target(service, match["fleet_id"], target, key, loop)
         except RoutingSvcError:  # raised before anything was queued: the route answers
             await self.app(scope, replay, send)
             return
@@ -117,7 +111,7 @@ def _idempotency_key(scope: Scope) -> tuple[bool, str | None]:
     if not values:
         return True, None
     key = values[0].decode("latin-1")
-    return len(values) == 1 and 1 <= len(key) <= MAX_IDEMPOTENCY_KEY, key
+    return len(values) == 1 and usable_idempotency_key(key), key
 
 
 async def _read_body(receive: Receive) -> bytes | None:

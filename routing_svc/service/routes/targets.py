@@ -6,15 +6,14 @@ import asyncio
 from collections.abc import Callable
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Header, Request, Response
+from fastapi import APIRouter, Depends, Request, Response
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
-from prometheus_client import Counter
 from pydantic import ValidationError
 from starlette.concurrency import run_in_threadpool
 
 from routing_svc.service.deadline import request_deadline
-from routing_svc.service.deps import fleet_service
+from routing_svc.service.deps import IdempotencyKey, fleet_service
 from routing_svc.service.fleets import FleetService, Outcome
 from routing_svc.service.responses import (
     CONFLICT,
@@ -27,20 +26,23 @@ from routing_svc.service.responses import (
     TravelTimesResult,
 )
 from routing_svc.service.schemas import TargetBatch, TargetSpec, TravelTimes
+from routing_svc.service.target_route import (
+    FLEET_PREFIX,
+    TARGET_ROUTE,
+    TARGETS_APPLIED,
+    submit_target,
+)
 
 router = APIRouter(
-    prefix="/v1/fleets/{fleet_id}",
+    prefix=FLEET_PREFIX,
     tags=["targets"],
     default_response_class=JSONResponse,  # json.dumps, as the answers always were written
     responses=READ,
 )
 Service = Annotated[FleetService, Depends(fleet_service)]
-IdempotencyKey = Annotated[str | None, Header(min_length=1, max_length=200)]
 
 TARGET_SPEC_REF = "#/components/schemas/TargetSpec"
 """The body schema of the single-target route (registered by ``/assign``'s body)."""
-
-TARGETS_APPLIED = Counter("routing_svc_targets_total", "Targets applied (acknowledged)")
 
 TARGET_RESPONSE: dict[int | str, dict[str, Any]] = (
     {
@@ -72,24 +74,6 @@ Submit = Callable[[asyncio.AbstractEventLoop | None], Outcome]
 """``submit(loop)`` queues a request (``loop``: see :meth:`FleetService.submit`)."""
 
 
-def submit_target(
-    service: FleetService,
-    fleet_id: str,
-    target: TargetSpec,
-    idempotency_key: str | None,
-    loop: asyncio.AbstractEventLoop | None = None,
-) -> Outcome:
-    """Queue one target of the single-target route for the service's writer.
-
-    Its ``Idempotency-Key`` digest covers the target as JSON. Raises (and
-    queues nothing) when the target's position is invalid.
-    """
-    body = target.model_dump(mode="json") if idempotency_key is not None else None
-    return service.submit_targets(
-        fleet_id, [target], idempotency_key=idempotency_key, body=body, loop=loop
-    )
-
-
 async def _committed(service: FleetService, fleet_id: str, submit: Submit) -> tuple[list[str], int]:
     """Queue a request (``submit``) and wait for its commit, until the request's deadline
     (:meth:`FleetService.settled`).
@@ -107,7 +91,7 @@ async def _committed(service: FleetService, fleet_id: str, submit: Submit) -> tu
 
 
 @router.post(
-    "/targets",
+    TARGET_ROUTE,
     responses=TARGET_RESPONSE,
     response_class=Response,
     openapi_extra={

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Header
+from fastapi import APIRouter, Depends
 from starlette.concurrency import run_in_threadpool
 
-from routing_svc.service.deps import fleet_service
+from routing_svc.service.deps import IdempotencyKey, fleet_service
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.responses import CONFLICT, FOUND, WRITE, VehicleStateResult
 from routing_svc.service.schemas import (
@@ -25,7 +25,6 @@ from routing_svc.service.schemas import (
 
 router = APIRouter(prefix="/v1/fleets/{fleet_id}/vehicles", tags=["vehicles"])
 Service = Annotated[FleetService, Depends(fleet_service)]
-IdempotencyKey = Annotated[str | None, Header(min_length=1, max_length=200)]
 
 
 STATE_ERRORS = WRITE | FOUND | CONFLICT
