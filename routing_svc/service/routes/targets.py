@@ -15,7 +15,7 @@ from starlette.concurrency import run_in_threadpool
 
 from routing_svc.service.deadline import request_deadline
 from routing_svc.service.deps import fleet_service
-from routing_svc.service.fleets import FleetService, Outcome
+from routing_svc.service.fleets import FleetService
 from routing_svc.service.responses import (
     CONFLICT,
     FOUND,
@@ -27,6 +27,7 @@ from routing_svc.service.responses import (
     TravelTimesResult,
 )
 from routing_svc.service.schemas import TargetBatch, TargetSpec, TravelTimes
+from routing_svc.service.write_path import PendingAnswer
 
 router = APIRouter(
     prefix="/v1/fleets/{fleet_id}",
@@ -68,8 +69,8 @@ BATCH_RESPONSE: dict[int | str, dict[str, Any]] = (
 )
 
 
-Submit = Callable[[asyncio.AbstractEventLoop | None], Outcome]
-"""``submit(loop)`` queues a request (``loop``: see :meth:`FleetService.submit`)."""
+Submit = Callable[[asyncio.AbstractEventLoop | None], PendingAnswer]
+"""``submit(loop)`` queues a request (``loop``: see :meth:`GroupCommit.submit`)."""
 
 
 def submit_target(
@@ -78,7 +79,7 @@ def submit_target(
     target: TargetSpec,
     idempotency_key: str | None,
     loop: asyncio.AbstractEventLoop | None = None,
-) -> Outcome:
+) -> PendingAnswer:
     """Queue one target of the single-target route for the service's writer.
 
     Its ``Idempotency-Key`` digest covers the target as JSON. Raises (and
@@ -154,7 +155,7 @@ async def post_target_batch(
     """Serve a list of targets in order, in one transaction."""
     body = batch.model_dump(mode="json") if idempotency_key is not None else None
 
-    def submit(loop: asyncio.AbstractEventLoop | None) -> Outcome:
+    def submit(loop: asyncio.AbstractEventLoop | None) -> PendingAnswer:
         return service.submit_targets(
             fleet_id, batch.targets, idempotency_key=idempotency_key, body=body, loop=loop
         )
