@@ -286,11 +286,14 @@ def bench_service(
 
 
 def _append_loop(log: Any, fid: str, n: int, build: Any, sink: list[float]) -> None:
-    """``n`` appends to ``fid``; the wall time of each goes to ``sink``."""
+    """``n`` appends to ``fid``, one request a group; the wall time of each goes to ``sink``."""
+    from routing_svc.store import FleetGroup
+
     version = 1  # the writer's cache: it gets the events it missed, as a worker does
     for _ in range(n):
         t0 = time.perf_counter()
-        version = log.append(fid, expected_version=version, build=build).version
+        ((item,),) = log.append_groups([FleetGroup(fid, version, ((None, None),), build)])
+        version = item.version
         sink.append(time.perf_counter() - t0)
 
 
@@ -299,7 +302,7 @@ RESULT = json.dumps({"pad": "x" * 480})  # a target event's result is ~500 bytes
 
 
 def bench_store(url: str, *, appends: int) -> dict[str, Any]:
-    """Wall time of ``EventLog.append`` (one ~570-byte event per transaction), in-process.
+    """Wall time of ``EventLog.append_groups`` (one ~570-byte event per transaction), in-process.
 
     ``serial``: one writer, one fleet. ``four_fleets``: four threads, one fleet
     each (independent row locks; PostgreSQL commits them in parallel, sharing WAL
@@ -308,8 +311,8 @@ def bench_store(url: str, *, appends: int) -> dict[str, Any]:
     """
     from routing_svc.store import EventLog, NewEvent
 
-    def build(_missed: Any) -> list[Any]:
-        return [NewEvent("target", PAYLOAD, RESULT)]
+    def build(_missed: Any, fresh: list[int]) -> list[Any]:
+        return [[NewEvent("target", PAYLOAD, RESULT)]]
 
     out: dict[str, Any] = {}
     with EventLog(url) as log:

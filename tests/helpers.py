@@ -6,7 +6,7 @@ plain functions and constants, imported as ``from tests.helpers import ...``.
 - The DRT network of the service tests, fleet bodies and seeded target streams.
 - Routes, metrics and event loops of the service.
 - What a client sees from a failing store (reliability tests).
-- Event-log groups (store tests).
+- Appends and event-log groups (store tests).
 - The nearest-vehicle search against networkx (network tests).
 """
 
@@ -19,7 +19,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -31,7 +31,15 @@ from prometheus_client import REGISTRY
 from routing_svc.errors import RoutingSvcError
 from routing_svc.network import RoadSpace, load_network
 from routing_svc.sa.space import Assignment, Requirement
-from routing_svc.store import EventLog, EventRecord, NewEvent
+from routing_svc.store import (
+    BuildGroup,
+    EventLog,
+    EventRecord,
+    FleetGroup,
+    GroupItem,
+    NewEvent,
+    Snapshot,
+)
 from routing_svc.types import NetPosition
 from tests.network.conftest import NetCase
 from tests.service.conftest import DRT
@@ -218,7 +226,48 @@ def check_log(db_url: str, fleet: str, acked: dict[str, bytes]) -> int:
     return len(stored)
 
 
-# --- event-log groups -------------------------------------------------------------------
+# --- appends and event-log groups -------------------------------------------------------
+
+
+def append_group(
+    log: EventLog,
+    fleet_id: str,
+    *,
+    expected_version: int,
+    requests: Sequence[tuple[str | None, str | None]],
+    build: BuildGroup,
+    snapshot: Snapshot | None = None,
+) -> list[GroupItem]:
+    """One fleet's group appended in a transaction of its own (:meth:`EventLog.append_groups`,
+    the service's own path); one item per request."""
+    group = FleetGroup(fleet_id, expected_version, tuple(requests), build, snapshot)
+    (items,) = log.append_groups([group])
+    return items
+
+
+def append_one(
+    log: EventLog,
+    fleet_id: str,
+    *,
+    expected_version: int,
+    build: Callable[[list[EventRecord]], Sequence[NewEvent]],
+    idempotency_key: str | None = None,
+    request_hash: str | None = None,
+    snapshot: Snapshot | None = None,
+) -> GroupItem:
+    """One request appended as a group of one: ``build(missed) -> events``; its item, or
+    its error (an idempotency key used for another request) raised."""
+    (item,) = append_group(
+        log,
+        fleet_id,
+        expected_version=expected_version,
+        requests=[(idempotency_key, request_hash)],
+        build=lambda missed, fresh: [build(missed)],
+        snapshot=snapshot,
+    )
+    if item.error is not None:
+        raise item.error
+    return item
 
 
 def target_event(n: int) -> NewEvent:

@@ -11,8 +11,9 @@ import asyncio
 from prometheus_client import Counter
 from starlette.routing import compile_path
 
-from routing_svc.service.fleets import FleetService, Outcome
+from routing_svc.service.fleets import FleetService
 from routing_svc.service.schemas import TargetSpec
+from routing_svc.service.write_path import PendingAnswer
 
 __all__ = ["FLEET_PREFIX", "TARGETS_APPLIED", "TARGET_PATH", "TARGET_ROUTE", "submit_target"]
 
@@ -34,7 +35,7 @@ def submit_target(
     target: TargetSpec,
     idempotency_key: str | None,
     loop: asyncio.AbstractEventLoop | None = None,
-) -> Outcome:
+) -> PendingAnswer:
     """Queue one target of the single-target route for the service's writer.
 
     Its ``Idempotency-Key`` digest covers the target as JSON. Raises (and

@@ -2,20 +2,24 @@
 
 ::
 
-    from routing_svc.store import NewEvent, open_event_log
+    from routing_svc.store import FleetGroup, NewEvent, open_event_log
 
     with open_event_log("sqlite:///var/routing.db") as log:
         log.create_network("grid", sha256=digest, path=str(path), name="grid")
         log.create_fleet("taxis", "grid", config_json, created_payload_json)
-        result = log.append(
-            "taxis",
-            expected_version=cached_version,
-            build=lambda missed: [NewEvent("target", payload_json, outcome_json)],
-            idempotency_key=key,
-            request_hash=digest_of_request,
+        ((item,),) = log.append_groups(
+            [
+                FleetGroup(
+                    "taxis",
+                    expected_version=cached_version,
+                    requests=((key, digest_of_request),),
+                    build=lambda missed, fresh: [[NewEvent("target", payload, result)]],
+                )
+            ]
         )
 
 Modules: :mod:`~routing_svc.store.event_log` (the :class:`EventLog` API),
+:mod:`~routing_svc.store.staging` (the rows of a group commit),
 :mod:`~routing_svc.store.records` (records in and out),
 :mod:`~routing_svc.store.schema` (tables), :mod:`~routing_svc.store.queries`
 (statements), :mod:`~routing_svc.store.engine` (durability settings, checks,
@@ -25,28 +29,22 @@ migrations), ``migrations/`` (Alembic scripts, run at :meth:`EventLog.open`).
 from routing_svc.store.event_log import (
     FLEET_CREATED,
     FLEET_DELETED,
-    Build,
-    BuildGroup,
     EventLog,
-    FleetGroup,
-    Snapshot,
     UncommittedAppend,
     open_event_log,
 )
 from routing_svc.store.records import (
-    AppendResult,
     EventRecord,
     FleetRecord,
     GroupItem,
     NetworkRecord,
     NewEvent,
 )
+from routing_svc.store.staging import BuildGroup, FleetGroup, Snapshot
 
 __all__ = [
     "FLEET_CREATED",
     "FLEET_DELETED",
-    "AppendResult",
-    "Build",
     "BuildGroup",
     "EventLog",
     "EventRecord",

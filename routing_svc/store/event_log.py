@@ -2,14 +2,16 @@
 
 A fleet's state is the replay of its events; the ``fleets`` row keeps its
 version (the last event's ``seq``) and an optional snapshot so restarts are
-fast. :meth:`EventLog.append` is the one way to add events: in one transaction
-it locks the fleet row (``SELECT ... FOR UPDATE`` on PostgreSQL, the database
-write lock taken by ``BEGIN IMMEDIATE`` on SQLite), answers a retried
-idempotency key from the log, hands the events the caller has not seen yet to
-its ``build`` callback, and writes what ``build`` returns with contiguous
-numbers. Workers in several processes or on several hosts therefore apply
-events in one order, each replaying what it missed before computing the next.
-A call returns only after its transaction has committed.
+fast. :meth:`EventLog.append_groups` is the one way to add events: in one
+transaction it locks the fleets' rows (``SELECT ... FOR UPDATE`` on
+PostgreSQL, the database write lock taken by ``BEGIN IMMEDIATE`` on SQLite),
+answers a retried idempotency key from the log, hands the events the caller
+has not seen yet to each group's ``build`` callback, and writes what ``build``
+returns with contiguous numbers (:mod:`~routing_svc.store.staging`). Workers in
+several processes or on several hosts therefore apply events in one order,
+each replaying what it missed before computing the next. A call returns only
+after its transaction has committed;
+:meth:`EventLog.try_append_groups_uncommitted` leaves the commit to its caller.
 
 Deleting a fleet is a *soft* delete: the row is marked ``deleted`` and a
 ``fleet_deleted`` event closes the stream. The log stays readable as an audit
@@ -23,28 +25,18 @@ import os
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager, nullcontext, suppress
-from dataclasses import dataclass
-from datetime import datetime
 from types import TracebackType
-from typing import Any, Self
+from typing import Protocol, Self
 
 import sqlalchemy as sa
 from sqlalchemy.engine import Connection, Engine
 
-from routing_svc.errors import (
-    Conflict,
-    InvalidInput,
-    RoutingSvcError,
-    StorageError,
-    UnknownFleet,
-    UnknownNetwork,
-)
+from routing_svc.errors import Conflict, InvalidInput, StorageError, UnknownFleet, UnknownNetwork
 from routing_svc.store import engine as store_engine
 from routing_svc.store import queries as q
 from routing_svc.store.checkpoint import WalCheckpointer
 from routing_svc.store.engine import StoreTimeouts
 from routing_svc.store.records import (
-    AppendResult,
     EventRecord,
     FleetRecord,
     GroupItem,
@@ -52,28 +44,16 @@ from routing_svc.store.records import (
     NewEvent,
 )
 from routing_svc.store.schema import events, fleets, networks, store_probe
+from routing_svc.store.staging import FleetGroup, check_groups, write_groups
 from routing_svc.store.watchdog import ConnectionWatchdog
 
 __all__ = [
     "FLEET_CREATED",
     "FLEET_DELETED",
-    "Build",
-    "BuildGroup",
     "EventLog",
-    "FleetGroup",
-    "Snapshot",
     "UncommittedAppend",
     "open_event_log",
 ]
-
-Build = Callable[[list[EventRecord]], Sequence[NewEvent]]
-"""``build(missed_events) -> new events``, called under the fleet's lock."""
-BuildGroup = Callable[
-    [list[EventRecord], list[int]], Sequence[Sequence[NewEvent] | RoutingSvcError]
-]
-"""``build(missed_events, fresh_indices) -> per fresh request, its events or its error``."""
-Snapshot = Callable[[int], str | None]
-"""``snapshot(new_version) -> state JSON or None``, called after ``build``."""
 
 FLEET_CREATED = "fleet_created"
 """Kind of event number 1 of every fleet."""
@@ -178,6 +158,18 @@ class EventLog:
     def dialect(self) -> str:
         """``"sqlite"`` or ``"postgresql"``."""
         return self._require().dialect.name
+
+    @property
+    def engine(self) -> Engine:
+        """The open log's SQLAlchemy engine (for reads and event listeners; every write
+        goes through the log's own methods)."""
+        return self._require()
+
+    @property
+    def checkpointer(self) -> WalCheckpointer | None:
+        """The thread that checkpoints a SQLite database's write-ahead log (``None`` on
+        PostgreSQL, or when the log is closed)."""
+        return self._checkpointer
 
     # -- health ----------------------------------------------------------------
 
@@ -340,134 +332,11 @@ class EventLog:
 
     # -- events ----------------------------------------------------------------
 
-    def append(
-        self,
-        fleet_id: str,
-        *,
-        expected_version: int,
-        build: Build,
-        idempotency_key: str | None = None,
-        request_hash: str | None = None,
-        snapshot: Snapshot | None = None,
-    ) -> AppendResult:
-        """Append the events that ``build`` returns, in one transaction.
-
-        Parameters
-        ----------
-        fleet_id
-            The fleet.
-        expected_version
-            The version of the caller's cached state. The stored events after
-            it are passed to ``build`` so the caller can replay them first.
-        build
-            ``build(missed) -> [NewEvent, ...]``, called under the fleet's lock.
-            It may return several events (numbered contiguously) or none (then
-            nothing is written and the idempotency key is not recorded). If it
-            raises, nothing is written and the exception propagates.
-        idempotency_key, request_hash
-            A retry with a known key returns the stored events without calling
-            ``build``; :class:`Conflict` if its ``request_hash`` differs.
-        snapshot
-            ``snapshot(new_version) -> state JSON or None``, called after
-            ``build`` when events were built; a string is saved, in the same
-            transaction, as the fleet's snapshot at ``new_version``.
-
-        Returns
-        -------
-        AppendResult
-            Returned only after the transaction has committed.
-
-        Raises
-        ------
-        UnknownFleet
-            No such fleet, or it was deleted.
-        Conflict
-            ``expected_version`` is ahead of the log, or the idempotency key was
-            used for a different request.
-        InvalidInput
-            A bad argument, or ``build`` returned something other than events.
-        """
-
-        def build_one(missed: list[EventRecord], fresh: list[int]) -> list[Sequence[NewEvent]]:
-            return [build(missed)]
-
-        (item,) = self.append_group(
-            fleet_id,
-            expected_version=expected_version,
-            requests=[(idempotency_key, request_hash)],
-            build=build_one,
-            snapshot=snapshot,
-        )
-        if item.error is not None:
-            raise item.error
-        return AppendResult(fleet_id, item.version, item.events, item.missed, item.duplicate)
-
-    def append_group(
-        self,
-        fleet_id: str,
-        *,
-        expected_version: int,
-        requests: Sequence[tuple[str | None, str | None]],
-        build: BuildGroup,
-        snapshot: Snapshot | None = None,
-    ) -> list[GroupItem]:
-        """Append the events of several requests in one transaction (group commit).
-
-        Parameters
-        ----------
-        fleet_id
-            The fleet.
-        expected_version
-            The version of the caller's cached state; the stored events after
-            it are passed to ``build``.
-        requests
-            One ``(idempotency_key, request_hash)`` per request, in order
-            (either may be ``None``). A known key makes its request a
-            duplicate (its stored events are returned, nothing is built) or,
-            if the hash differs, fails it alone with :class:`Conflict`. A key
-            repeated within the group is handled as a duplicate of its first
-            occurrence: it gets the same events, or the same error.
-        build
-            ``build(missed, fresh) -> [events or error, ...]``, called under the
-            fleet's lock with the missed events and the indices (into
-            ``requests``) of the fresh requests; it returns one entry per fresh
-            request: a list of :class:`NewEvent` (possibly empty: nothing is
-            written and the key is not recorded) or a
-            :class:`~routing_svc.errors.RoutingSvcError` (that request fails
-            alone and nothing of it is written). It is not called when no
-            request is fresh. If it raises, nothing at all is written and the
-            exception propagates.
-        snapshot
-            ``snapshot(new_version) -> state JSON or None``, called once after
-            ``build`` when events were built; a string is saved, in the same
-            transaction, as the fleet's snapshot at ``new_version``.
-
-        Returns
-        -------
-        list[GroupItem]
-            One item per request, in order; returned only after the transaction
-            has committed.
-
-        Raises
-        ------
-        UnknownFleet
-            No such fleet, or it was deleted.
-        Conflict
-            ``expected_version`` is ahead of the log.
-        InvalidInput
-            A bad argument, or ``build`` returned something other than one
-            entry of events or an error per fresh request.
-        """
-        (items,) = self.append_groups(
-            [FleetGroup(fleet_id, expected_version, tuple(requests), build, snapshot)]
-        )
-        return items
-
     def append_groups(self, groups: Sequence[FleetGroup]) -> list[list[GroupItem]]:
         """Commit the groups of several fleets in one transaction.
 
-        Each :class:`FleetGroup` is handled exactly as :meth:`append_group`
-        handles its arguments, in order, inside a single transaction: one
+        Each :class:`~routing_svc.store.staging.FleetGroup` is staged in order
+        (:func:`~routing_svc.store.staging.stage_group`) inside a single transaction: one
         commit (one ``fsync`` on SQLite) makes them all durable. If anything
         raises (an unknown or deleted fleet, a version conflict, a ``build``
         that raises), nothing of any group is written and the exception
@@ -478,10 +347,20 @@ class EventLog:
         list[list[GroupItem]]
             Per group, one item per request; returned only after the
             transaction has committed.
+
+        Raises
+        ------
+        UnknownFleet
+            No such fleet, or it was deleted.
+        Conflict
+            A group's ``expected_version`` is ahead of the log.
+        InvalidInput
+            A bad argument, two groups of one fleet, or a ``build`` that
+            returned something other than one entry per fresh request.
         """
-        what = _check_groups(groups)
+        what = check_groups(groups)
         with self._write(what) as conn:
-            return _write_groups(conn, groups)
+            return write_groups(conn, groups)
 
     def try_append_groups_uncommitted(
         self, groups: Sequence[FleetGroup]
@@ -504,7 +383,7 @@ class EventLog:
             Whatever :meth:`append_groups` raises; the transaction is then rolled
             back and nothing is written.
         """
-        what = _check_groups(groups)
+        what = check_groups(groups)
         engine = self._require()
         if engine.dialect.name != "sqlite" or not self._sqlite_writer.acquire(blocking=False):
             return None
@@ -518,10 +397,10 @@ class EventLog:
             if isinstance(error, StorageError) and store_engine.is_sqlite_busy(error):
                 return None
             raise
-        opened = UncommittedAppend(self, conn, what, [])
+        opened = UncommittedAppend(conn, what, [], self._end_uncommitted)
         try:
             with store_engine.storage_errors(what):
-                opened.items = _write_groups(conn, groups)
+                opened.items = write_groups(conn, groups)
         except BaseException:
             opened.rollback()  # (the connection stays open unless that fails too)
             raise
@@ -541,6 +420,20 @@ class EventLog:
                 driver.execute("PRAGMA busy_timeout = 0")
             self._impatient = conn
         return self._impatient
+
+    def _end_uncommitted(self, error: BaseException | None, *, committing: bool) -> None:
+        """An :class:`UncommittedAppend` ended (with ``error`` if ending it failed): give
+        the write lock back, drop the connection after a failure, note a commit's outcome
+        as a write's."""
+        try:
+            if error is not None:
+                self._drop_impatient_connection()
+                if committing and isinstance(error, StorageError):
+                    self._note_write(error)
+        finally:
+            self._sqlite_writer.release()
+        if committing and error is None:
+            self._note_write(None)
 
     def _drop_impatient_connection(self) -> None:
         if self._impatient is not None:
@@ -653,26 +546,11 @@ class EventLog:
             yield conn
 
 
-def _check_groups(groups: Sequence[FleetGroup]) -> str:
-    """Check :meth:`EventLog.append_groups`'s arguments; what the append is called in errors."""
-    for group in groups:
-        q.check_version(group.expected_version)
-        for key, digest in group.requests:
-            q.check_key(key, "idempotency key")
-            q.check_key(digest, "request hash")
-    if len({group.fleet_id for group in groups}) != len(groups):
-        raise InvalidInput("append_groups takes at most one group per fleet")
-    return "append to fleets " + ", ".join(repr(g.fleet_id) for g in groups)
+class TransactionEnded(Protocol):
+    """``ended(error, committing=...)``: an :class:`UncommittedAppend` ended, with the
+    exception that ending it raised (``None`` if it did not)."""
 
-
-def _write_groups(conn: Connection, groups: Sequence[FleetGroup]) -> list[list[GroupItem]]:
-    """Stage and write ``groups`` in the open write transaction ``conn``; their items."""
-    versions = q.lock_fleets(conn, [group.fleet_id for group in groups])
-    created_at = q.now()  # one moment for the whole transaction
-    staged = [_stage_in(conn, group, versions[group.fleet_id], created_at) for group in groups]
-    q.insert_event_rows(conn, [row for stage in staged for row in stage.rows])
-    q.move_versions(conn, [stage.move for stage in staged if stage.move is not None])
-    return [stage.items for stage in staged]
+    def __call__(self, error: BaseException | None, *, committing: bool) -> None: ...
 
 
 class UncommittedAppend:
@@ -681,15 +559,35 @@ class UncommittedAppend:
     ``items`` are the groups' items, valid once :meth:`commit` returned.
     Exactly one of :meth:`commit` and :meth:`rollback` must be called; both
     may run on another thread than the one that started the transaction.
+
+    Parameters
+    ----------
+    connection
+        The connection whose transaction is open.
+    what
+        What the append is called in errors.
+    items
+        The groups' items.
+    ended
+        Called once the transaction ended; the log gives its write lock back there.
     """
 
     def __init__(
-        self, log: EventLog, conn: Connection, what: str, items: list[list[GroupItem]]
+        self,
+        connection: Connection,
+        what: str,
+        items: list[list[GroupItem]],
+        ended: TransactionEnded,
     ) -> None:
-        self._log = log
-        self._conn = conn
+        self._connection = connection
         self._what = what
+        self._ended = ended
         self.items = items
+
+    @property
+    def connection(self) -> Connection:
+        """The connection whose transaction is open."""
+        return self._connection
 
     def commit(self) -> None:
         """Commit (one ``fsync``); on failure nothing is written and the error is raised.
@@ -698,13 +596,13 @@ class UncommittedAppend:
         interpreter lock once, at SQLite's commit, after a few microseconds of Python
         (SQLAlchemy's commit runs more, and the driver's ``commit()`` releases the lock
         twice: a thread that must get it back mid-way can wait for a busy event loop,
-        see :mod:`routing_svc.service.committer`). SQLAlchemy's commit then only ends its
-        own transaction: the driver has nothing left to commit.
+        see :mod:`routing_svc.service.write_path.committer`). SQLAlchemy's commit then
+        only ends its own transaction: the driver has nothing left to commit.
         """
         self._end(self._commit_on_driver, f"commit ({self._what})", committing=True)
 
     def _commit_on_driver(self) -> None:
-        conn = self._conn
+        conn = self._connection
         driver = conn.connection.dbapi_connection
         assert driver is not None
         driver.execute("COMMIT")
@@ -712,41 +610,17 @@ class UncommittedAppend:
 
     def rollback(self) -> None:
         """Write nothing."""
-        self._end(self._conn.rollback, f"roll back ({self._what})", committing=False)
+        self._end(self._connection.rollback, f"roll back ({self._what})", committing=False)
 
     def _end(self, finish: Callable[[], None], what: str, *, committing: bool) -> None:
-        """End the transaction with ``finish``; give the write lock back in any case and
-        drop the connection if that failed. A commit's outcome is noted as a write's."""
-        log = self._log
+        """End the transaction with ``finish``, then tell the log how it went."""
         try:
             with store_engine.storage_errors(what):
                 finish()
         except BaseException as error:
-            log._drop_impatient_connection()
-            if committing and isinstance(error, StorageError):
-                log._note_write(error)
+            self._ended(error, committing=committing)
             raise
-        finally:
-            log._sqlite_writer.release()
-        if committing:
-            log._note_write(None)
-
-
-def _checked_group(
-    built: Sequence[Sequence[NewEvent] | RoutingSvcError], expected: int
-) -> list[list[NewEvent] | RoutingSvcError]:
-    """Check ``build``'s answer: one entry of events or an error per fresh request."""
-    if isinstance(built, str | bytes) or not isinstance(built, Sequence):
-        raise InvalidInput("a group build must return a list with one entry per fresh request")
-    entries = list(built)
-    if len(entries) != expected:
-        raise InvalidInput(
-            f"a group build returned {len(entries)} entries for {expected} fresh requests"
-        )
-    return [
-        entry if isinstance(entry, RoutingSvcError) else q.check_new_events(entry)
-        for entry in entries
-    ]
+        self._ended(None, committing=committing)
 
 
 def open_event_log(
@@ -754,108 +628,3 @@ def open_event_log(
 ) -> EventLog:
     """Create an :class:`EventLog` for ``url`` and open it."""
     return EventLog(url, busy_timeout_ms=busy_timeout_ms, timeouts=timeouts).open()
-
-
-@dataclass(frozen=True, slots=True)
-class FleetGroup:
-    """The arguments of :meth:`EventLog.append_group` for one fleet."""
-
-    fleet_id: str
-    expected_version: int
-    requests: tuple[tuple[str | None, str | None], ...]
-    build: BuildGroup
-    snapshot: Snapshot | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class _Staged:
-    """One fleet's share of a transaction, computed but not yet written."""
-
-    rows: list[dict[str, Any]]
-    move: tuple[str, int, str | None] | None
-    """``(fleet, new version, snapshot or None)``, ``None`` when nothing is written."""
-    items: list[GroupItem]
-
-
-def _stage_in(conn: Connection, group: FleetGroup, version: int, created_at: datetime) -> _Staged:
-    """Build one fleet's group inside the open transaction ``conn``, whose row is
-    locked at ``version``, with events stamped ``created_at``; the caller writes the
-    rows and the version."""
-    fleet_id, expected_version = group.fleet_id, group.expected_version
-    requests, build, snapshot = group.requests, group.build, group.snapshot
-    if expected_version > version:
-        raise Conflict(
-            f"fleet {fleet_id!r} is at version {version}; "
-            f"the caller's cache claims version {expected_version}"
-        )
-    stored: dict[str, list[EventRecord]] = {}
-    first_index: dict[str, int] = {}
-    fresh: list[int] = []
-    repeats: dict[int, int] = {}  # index of a repeated key -> its first occurrence
-    for index, (key, _) in enumerate(requests):
-        if key is None:
-            fresh.append(index)
-        elif key in first_index:
-            repeats[index] = first_index[key]
-        else:
-            first_index[key] = index
-            prior = q.keyed_batch(conn, fleet_id, key)
-            if prior:
-                stored[key] = prior
-            else:
-                fresh.append(index)
-    # the events after the caller's version, if other writers appended any
-    missed = (
-        tuple(q.select_events(conn, fleet_id, after=expected_version))
-        if version > expected_version
-        else ()
-    )
-    built: list[list[NewEvent] | RoutingSvcError] = []
-    if fresh:
-        built = _checked_group(build(list(missed), list(fresh)), len(fresh))
-    rows: list[dict[str, Any]] = []
-    outcome: dict[int, tuple[tuple[EventRecord, ...], RoutingSvcError | None]] = {}
-    for index, entry in zip(fresh, built, strict=True):
-        if isinstance(entry, RoutingSvcError):
-            outcome[index] = ((), entry)
-            continue
-        key, digest = requests[index]
-        mine = q.event_rows(
-            fleet_id,
-            version + len(rows),
-            entry,
-            idempotency_key=key,
-            request_hash=digest,
-            created_at=created_at,
-        )
-        rows += mine
-        outcome[index] = (q.records_of_rows(mine), None)
-    new_version = version + len(rows)
-    move: tuple[str, int, str | None] | None = None
-    if rows:
-        state = snapshot(new_version) if snapshot is not None else None
-        if state is not None and not isinstance(state, str):
-            raise InvalidInput("snapshot must return JSON text (str) or None")
-        move = (fleet_id, new_version, state)
-    items: list[GroupItem] = []
-    for index, (key, digest) in enumerate(requests):
-        first = repeats.get(index, index)
-        duplicate = first != index
-        if key is not None and key in stored:
-            prior_events = stored[key]
-            if prior_events[0].request_hash != digest:
-                error: RoutingSvcError = Conflict(
-                    f"idempotency key {key!r} was used for another request"
-                )
-                items.append(GroupItem(new_version, (), missed, False, error))
-            else:
-                items.append(GroupItem(new_version, tuple(prior_events), missed, True))
-            continue
-        events_of, failed = outcome[first]
-        if duplicate and requests[first][1] != digest:
-            failed = Conflict(f"idempotency key {key!r} was used for another request")
-        if failed is not None:
-            items.append(GroupItem(new_version, (), missed, False, failed))
-        else:
-            items.append(GroupItem(new_version, events_of, missed, duplicate))
-    return _Staged(rows, move, items)

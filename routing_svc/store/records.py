@@ -14,7 +14,6 @@ from typing import Any
 from routing_svc.errors import RoutingSvcError
 
 __all__ = [
-    "AppendResult",
     "EventRecord",
     "FleetRecord",
     "GroupItem",
@@ -85,38 +84,8 @@ class EventRecord:
 
 
 @dataclass(frozen=True, slots=True)
-class AppendResult:
-    """What :meth:`EventLog.append` did.
-
-    Attributes
-    ----------
-    fleet_id
-        The fleet appended to.
-    version
-        The fleet's version (its last event's ``seq``) after the call.
-    events
-        The events this call wrote; for a duplicate, the events that the first
-        call with the same idempotency key wrote.
-    missed
-        The stored events after the caller's ``expected_version`` that existed
-        before this call's events: replaying ``missed`` and then ``events``
-        (unless ``duplicate``) brings a cache at ``expected_version`` to
-        ``version``. For a duplicate, ``missed`` runs up to ``version``.
-    duplicate
-        ``True`` when the idempotency key had been used: nothing was written
-        and ``build`` was not called.
-    """
-
-    fleet_id: str
-    version: int
-    events: tuple[EventRecord, ...]
-    missed: tuple[EventRecord, ...]
-    duplicate: bool
-
-
-@dataclass(frozen=True, slots=True)
 class GroupItem:
-    """What :meth:`EventLog.append_group` did for one request of a group.
+    """What :meth:`EventLog.append_groups` did for one request of a group.
 
     Attributes
     ----------

@@ -17,7 +17,7 @@ from typing import Any
 
 import httpx
 
-from routing_svc.service.fleets import SNAPSHOT_EVERY
+from routing_svc.service.write_path import SNAPSHOT_EVERY
 from tests.helpers import fleet_body, replay_ok, targets
 from tests.service.conftest import LiveServer
 

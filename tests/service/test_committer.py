@@ -9,7 +9,7 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
-from routing_svc.service.committer import COMMIT_HANDOFF_WAIT, Committer
+from routing_svc.service.write_path.committer import COMMIT_HANDOFF_WAIT, Committer
 from tests.helpers import blocked_until, handoff_timeouts, run
 
 
@@ -47,7 +47,7 @@ def test_the_hand_over_returns_once_the_thread_has_taken_the_commit(
     async def hand_over() -> tuple[bool, bool]:
         loop = asyncio.get_running_loop()
         done = committer.hand_over(loop, blocked_until(release))
-        taken = not committer._jobs  # the thread took it before the loop went on
+        taken = committer.waiting == 0  # the thread took it before the loop went on
         finished_early = done.done()
         release.set()
         await done

@@ -6,14 +6,15 @@ from __future__ import annotations
 
 import asyncio
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+import sqlalchemy as sa
 
-from routing_svc.service.fleets import Answer, Outcome
 from routing_svc.service.inprocess import InProcessFleetClient
 from routing_svc.service.schemas import TargetSpec
+from routing_svc.service.write_path import Answer, PendingAnswer
 from tests.helpers import blocked_until, fleet_body, handoff_timeouts, run, targets
 from tests.service.conftest import DRT
 
@@ -30,7 +31,7 @@ def specs(seed: int, n: int) -> list[TargetSpec]:
     return [TargetSpec.model_validate(t) for t in targets(seed, n)]
 
 
-def on_loop(future: Outcome) -> asyncio.Future[Answer]:
+def on_loop(future: PendingAnswer) -> asyncio.Future[Answer]:
     """The future of a request queued from a loop: one of that loop's."""
     assert isinstance(future, asyncio.Future)
     return future
@@ -54,7 +55,7 @@ def test_a_group_written_by_a_worker_thread_answers_on_the_loop(
     client: InProcessFleetClient,
 ) -> None:
     service = client.service
-    lock = service._lock_of("a")
+    lock = service.lock_of("a")
 
     async def post() -> list[int]:
         loop = asyncio.get_running_loop()
@@ -98,24 +99,20 @@ def test_the_commit_runs_on_the_committer_thread_and_the_loop_serves_while_it_wa
     goes on running its other callbacks, and the target is answered once it is durable."""
     service = client.service
     committer_threads: list[str] = []
-    hand_over = service._commit_beside_loop
 
-    async def watched(loop: asyncio.AbstractEventLoop, commit: Callable[[], None]) -> None:
-        def commit_and_record() -> None:
-            committer_threads.append(threading.current_thread().name)
-            commit()
-
-        await hand_over(loop, commit_and_record)
+    def commit_seen(conn: sa.engine.Connection) -> None:
+        committer_threads.append(threading.current_thread().name)
 
     async def post() -> tuple[int, int, bool, bool]:
         loop = asyncio.get_running_loop()
         # a first target starts the committer thread; it commits there
         (_, first) = await on_loop(service.submit_targets("a", specs(5, 1), loop=loop))
         timeouts_before = handoff_timeouts()
-        assert service._committer is not None
+        committer = service.group_commit.committer
+        assert committer is not None
         release = threading.Event()
         # the committer is busy, so it cannot start the next commit
-        busy = service._committer.hand_over(loop, blocked_until(release))
+        busy = committer.hand_over(loop, blocked_until(release))
         future = on_loop(service.submit_targets("a", specs(6, 1), loop=loop))
         ran_meanwhile = asyncio.Event()
         loop.call_soon(ran_meanwhile.set)
@@ -129,9 +126,11 @@ def test_the_commit_runs_on_the_committer_thread_and_the_loop_serves_while_it_wa
         timed_out = handoff_timeouts() - timeouts_before == 1
         return first, second, pending_while_busy, timed_out
 
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(service, "_commit_beside_loop", watched)
+    sa.event.listen(service.log.engine, "commit", commit_seen)
+    try:
         first, second, pending_while_busy, timed_out = run(post())
+    finally:
+        sa.event.remove(service.log.engine, "commit", commit_seen)
     assert (first, second) == (2, 3)
     assert pending_while_busy and timed_out
     assert committer_threads == ["routing-svc-commit"] * 2

@@ -33,14 +33,14 @@ def specs(seed: int, n: int) -> list[TargetSpec]:
 
 def commits_of(service: FleetService) -> list[int]:
     seen: list[int] = []
-    sa.event.listen(service.log._require(), "commit", lambda conn: seen.append(1))
+    sa.event.listen(service.log.engine, "commit", lambda conn: seen.append(1))
     return seen
 
 
 def submit_together(service: FleetService, work: list[tuple[str, list[TargetSpec]]]) -> list[Any]:
     """Queue every request while the writer cannot take any, so that it takes them
     as one batch."""
-    with service._queue_cond:
+    with service.group_commit.together():
         return [service.submit_targets(fleet_id, batch) for fleet_id, batch in work]
 
 

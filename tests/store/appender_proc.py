@@ -5,9 +5,10 @@ Usage::
     python appender_proc.py race URL FLEET WORKER COUNT
     python appender_proc.py crash URL FLEET
 
-``race`` appends COUNT ``target`` events the way a service worker does: it
-keeps a cached count of targets and its version, replays the events it missed
-inside ``build`` and stores the count it computed as the event's result. Every
+``race`` appends COUNT ``target`` events the way a service worker does
+(:meth:`EventLog.append_groups`, one request a group): it keeps a cached count
+of targets and its version, replays the events it missed inside ``build`` and
+stores the count it computed as the event's result. Every
 append is sent twice with the same idempotency key (a retry after a lost
 answer). ``crash`` appends forever and prints each version after its commit,
 so the parent can kill it and check that every acknowledged event survived.
@@ -17,9 +18,16 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Callable
 
-from routing_svc.store import EventRecord, NewEvent, open_event_log
+from routing_svc.store import (
+    BuildGroup,
+    EventLog,
+    EventRecord,
+    FleetGroup,
+    GroupItem,
+    NewEvent,
+    open_event_log,
+)
 
 
 class CachedFleet:
@@ -29,15 +37,13 @@ class CachedFleet:
         self.version = 1
         self.targets = 0
 
-    def build_target(
-        self, payload: dict[str, object]
-    ) -> Callable[[list[EventRecord]], list[NewEvent]]:
-        def build(missed: list[EventRecord]) -> list[NewEvent]:
+    def build_target(self, payload: dict[str, object]) -> BuildGroup:
+        def build(missed: list[EventRecord], fresh: list[int]) -> list[list[NewEvent]]:
             seen = self.targets + sum(1 for e in missed if e.kind == "target")
             expected = list(range(self.version + 1, self.version + 1 + len(missed)))
             if [e.seq for e in missed] != expected:
                 raise RuntimeError(f"missed events out of order: {[e.seq for e in missed]}")
-            return [NewEvent("target", json.dumps(payload), json.dumps({"count": seen + 1}))]
+            return [[NewEvent("target", json.dumps(payload), json.dumps({"count": seen + 1}))]]
 
         return build
 
@@ -54,28 +60,25 @@ def race(url: str, fleet: str, worker: str, count: int) -> None:
         for i in range(count):
             key = f"{worker}-{i}"
             payload = {"worker": worker, "i": i}
-            first = log.append(
-                fleet,
-                expected_version=cache.version,
-                build=cache.build_target(payload),
-                idempotency_key=key,
-                request_hash=key,
-            )
-            retry = log.append(
-                fleet,
-                expected_version=cache.version,
-                build=cache.build_target(payload),
-                idempotency_key=key,
-                request_hash=key,
-            )
+            request = FleetGroup(fleet, cache.version, ((key, key),), cache.build_target(payload))
+            first = append(log, request)
+            retry = append(log, request)
             if not retry.duplicate or retry.events != first.events:
                 raise RuntimeError(f"retry of {key} was applied again")
             cache.catch_up(first.missed + first.events)
 
 
-def constant(batch: list[NewEvent]) -> Callable[[list[EventRecord]], list[NewEvent]]:
+def append(log: EventLog, request: FleetGroup) -> GroupItem:
+    """Append a group of one request; its item."""
+    ((item,),) = log.append_groups([request])
+    if item.error is not None:
+        raise item.error
+    return item
+
+
+def constant(batch: list[NewEvent]) -> BuildGroup:
     """A build that ignores the missed events (this writer is the only one)."""
-    return lambda missed: batch
+    return lambda missed, fresh: [batch]
 
 
 def crash(url: str, fleet: str) -> None:
@@ -84,7 +87,7 @@ def crash(url: str, fleet: str) -> None:
         while True:
             payload = json.dumps({"n": version})
             batch = [NewEvent("target", payload), NewEvent("target", payload)]
-            result = log.append(fleet, expected_version=version, build=constant(batch))
+            result = append(log, FleetGroup(fleet, version, ((None, None),), constant(batch)))
             version = result.version
             print(version, flush=True)
 

@@ -16,7 +16,7 @@ from routing_svc.store import (
     NewEvent,
     open_event_log,
 )
-from tests.helpers import one_each, target_event
+from tests.helpers import append_group, append_one, one_each, target_event
 
 SHA = "ab" * 32
 
@@ -34,7 +34,8 @@ def stored_view(item: GroupItem) -> list[tuple[int, str, str, str | None, str | 
 
 
 def test_mixed_group_in_one_transaction(log: EventLog) -> None:
-    known = log.append(
+    known = append_one(
+        log,
         "f",
         expected_version=1,
         build=lambda m: [target_event(1), target_event(2)],
@@ -65,7 +66,7 @@ def test_mixed_group_in_one_transaction(log: EventLog) -> None:
         ("d", "h-x"),  # 7 repeats 3 with another hash: Conflict
         ("c", "h-c"),  # 8 repeats 2, which failed: the same error
     ]
-    items = log.append_group("f", expected_version=1, requests=requests, build=build)
+    items = append_group(log, "f", expected_version=1, requests=requests, build=build)
     assert calls == [([2, 3], [0, 2, 3, 5])]
     assert all(item.version == 7 for item in items)
     assert [e.seq for e in items[0].missed] == [2, 3]
@@ -91,7 +92,8 @@ def test_mixed_group_in_one_transaction(log: EventLog) -> None:
     def never(missed: list[EventRecord], fresh: list[int]) -> list[list[NewEvent]]:
         raise AssertionError("build must not run when every request is known")
 
-    retry = log.append_group(
+    retry = append_group(
+        log,
         "f",
         expected_version=7,
         requests=[("a", "h-a"), ("d", "h-d"), ("old", "h-old")],
@@ -101,12 +103,17 @@ def test_mixed_group_in_one_transaction(log: EventLog) -> None:
     for again, first in zip(retry, [items[0], items[3], items[1]], strict=True):
         assert again.events == first.events
         assert stored_view(again) == stored_view(first)
-    single = log.append("f", expected_version=7, build=lambda m: [], idempotency_key="d",
-                        request_hash="h-d")  # fmt: skip
+    single = append_one(
+        log, "f", expected_version=7, build=lambda m: [], idempotency_key="d", request_hash="h-d"
+    )
     assert single.duplicate and single.events == items[3].events
     # the failed request's key was not consumed
-    later = log.append_group(
-        "f", expected_version=7, requests=[("c", "h-c")], build=lambda m, f: [[target_event(8)]]
+    later = append_group(
+        log,
+        "f",
+        expected_version=7,
+        requests=[("c", "h-c")],
+        build=lambda m, f: [[target_event(8)]],
     )
     assert [e.seq for e in later[0].events] == [8] and not later[0].duplicate
 
@@ -118,7 +125,8 @@ def test_snapshot_is_taken_once_at_the_group_version(log: EventLog) -> None:
         seen.append(version)
         return f'{{"at": {version}}}'
 
-    log.append_group(
+    append_group(
+        log,
         "f",
         expected_version=1,
         requests=[(None, None), (None, None)],
@@ -135,30 +143,36 @@ def test_failing_build_writes_nothing(log: EventLog) -> None:
         raise ZeroDivisionError("bug")
 
     with pytest.raises(ZeroDivisionError):
-        log.append_group("f", expected_version=1, requests=[("k1", "h"), (None, None)], build=build)
+        append_group(
+            log, "f", expected_version=1, requests=[("k1", "h"), (None, None)], build=build
+        )
     with pytest.raises(InvalidInput, match="entries"):
-        log.append_group(
-            "f", expected_version=1, requests=[("k1", "h"), (None, None)],
+        append_group(
+            log, "f", expected_version=1, requests=[("k1", "h"), (None, None)],
             build=lambda m, f: [[target_event(1)]],
         )  # fmt: skip
     bad: list[list[NewEvent]] = [["nope"]]  # type: ignore[list-item]
     with pytest.raises(InvalidInput):
-        log.append_group("f", expected_version=1, requests=[(None, None)], build=lambda m, f: bad)
+        append_group(log, "f", expected_version=1, requests=[(None, None)], build=lambda m, f: bad)
     assert log.get_fleet("f").version == 1
     assert len(log.events_since("f", 0)) == 1
     # the keys were not consumed
-    items = log.append_group(
-        "f", expected_version=1, requests=[("k1", "h")], build=lambda m, f: [[target_event(1)]]
+    items = append_group(
+        log, "f", expected_version=1, requests=[("k1", "h")], build=lambda m, f: [[target_event(1)]]
     )
     assert not items[0].duplicate and items[0].version == 2
 
 
 def test_group_checks_the_cache_version_and_keys(log: EventLog) -> None:
     with pytest.raises(Conflict, match="version 1"):
-        log.append_group("f", expected_version=5, requests=[(None, None)], build=lambda m, f: [])
+        append_group(log, "f", expected_version=5, requests=[(None, None)], build=lambda m, f: [])
     with pytest.raises(InvalidInput):
-        log.append_group(
-            "f", expected_version=1, requests=[("", None)], build=lambda m, f: [[target_event(1)]]
+        append_group(
+            log,
+            "f",
+            expected_version=1,
+            requests=[("", None)],
+            build=lambda m, f: [[target_event(1)]],
         )
     assert log.get_fleet("f").version == 1
 
@@ -166,7 +180,7 @@ def test_group_checks_the_cache_version_and_keys(log: EventLog) -> None:
 def test_groups_of_several_fleets_commit_together(log: EventLog) -> None:
     log.create_fleet("g", "grid", "{}", "{}")
     commits: list[int] = []
-    sa.event.listen(log._require(), "commit", lambda conn: commits.append(1))
+    sa.event.listen(log.engine, "commit", lambda conn: commits.append(1))
     results = log.append_groups(
         [
             FleetGroup("f", 1, (("k", "h"), (None, None)), one_each),

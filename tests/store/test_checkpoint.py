@@ -30,9 +30,9 @@ def test_commits_do_not_checkpoint_and_the_thread_does(tmp_path: Path) -> None:
     """Events reach the database file (from the log) only through the checkpoint thread."""
     path = tmp_path / "events.db"
     with EventLog(f"sqlite:///{path}") as log:
-        with log._require().connect() as conn:
+        with log.engine.connect() as conn:
             assert conn.exec_driver_sql("PRAGMA wal_autocheckpoint").scalar_one() == 0
-        checkpointer = log._checkpointer
+        checkpointer = log.checkpointer
         assert checkpointer is not None
         log.create_network("n", sha256="0" * 64, path="/dev/null", name="n")
         log.create_fleet("a", "n", "{}", "{}")
@@ -42,10 +42,12 @@ def test_commits_do_not_checkpoint_and_the_thread_does(tmp_path: Path) -> None:
         assert path.stat().st_size == before  # every commit left its pages in the log
         assert Path(f"{path}-wal").stat().st_size > 4_000_000
         restarted = WalCheckpointer(str(path), interval=0.05).start()
-        log._checkpointer = restarted
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and path.stat().st_size < before + 4_000_000:
-            time.sleep(0.05)
+        try:
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline and path.stat().st_size < before + 4_000_000:
+                time.sleep(0.05)
+        finally:
+            restarted.stop()
         assert path.stat().st_size > before + 4_000_000  # copied by the thread
         assert restarted.checkpoints >= 1
         assert [e.seq for e in log.events("a", after=2000, limit=10)] == [2001]

@@ -21,6 +21,7 @@ from routing_svc.store import (
     NewEvent,
     open_event_log,
 )
+from tests.helpers import append_one
 
 SHA = "ab" * 32
 
@@ -86,7 +87,7 @@ def test_create_fleet_writes_row_and_first_event(log: EventLog) -> None:
 
 def test_append_numbers_a_batch_contiguously(log: EventLog) -> None:
     log.create_fleet("f", "grid", "{}", "{}")
-    result = log.append("f", expected_version=1, build=lambda missed: [target(1), target(2)])
+    result = append_one(log, "f", expected_version=1, build=lambda missed: [target(1), target(2)])
     assert (result.version, result.duplicate, result.missed) == (3, False, ())
     assert [e.seq for e in result.events] == [2, 3]
     assert [e.payload_json for e in log.events_since("f", 1)] == ['{"n": 1}', '{"n": 2}']
@@ -95,19 +96,19 @@ def test_append_numbers_a_batch_contiguously(log: EventLog) -> None:
 
 def test_build_sees_the_events_the_caller_missed(log: EventLog) -> None:
     log.create_fleet("f", "grid", "{}", "{}")
-    log.append("f", expected_version=1, build=lambda missed: [target(1), target(2)])
+    append_one(log, "f", expected_version=1, build=lambda missed: [target(1), target(2)])
     seen: list[list[EventRecord]] = []
 
     def build(missed: list[EventRecord]) -> list[NewEvent]:
         seen.append(missed)
         return [target(3)]
 
-    result = log.append("f", expected_version=1, build=build)
+    result = append_one(log, "f", expected_version=1, build=build)
     assert [e.seq for e in seen[0]] == [2, 3]
     assert [e.seq for e in result.missed] == [2, 3]
     assert [e.seq for e in result.events] == [4]
     with pytest.raises(Conflict, match="version 4"):
-        log.append("f", expected_version=9, build=build)
+        append_one(log, "f", expected_version=9, build=build)
 
 
 def test_failing_build_writes_nothing(log: EventLog) -> None:
@@ -117,47 +118,52 @@ def test_failing_build_writes_nothing(log: EventLog) -> None:
         raise ZeroDivisionError("replay failed")
 
     with pytest.raises(ZeroDivisionError):
-        log.append("f", expected_version=1, build=build, idempotency_key="k", request_hash="h")
+        append_one(log, "f", expected_version=1, build=build, idempotency_key="k", request_hash="h")
     assert log.get_fleet("f").version == 1
     assert len(log.events_since("f", 0)) == 1
     # the key was not consumed: a retry with a working build applies once
-    retry = log.append("f", expected_version=1, build=lambda m: [target(1)], idempotency_key="k")
+    retry = append_one(
+        log, "f", expected_version=1, build=lambda m: [target(1)], idempotency_key="k"
+    )
     assert retry.version == 2 and not retry.duplicate
 
 
 def test_bad_build_output_is_rejected_and_writes_nothing(log: EventLog) -> None:
     log.create_fleet("f", "grid", "{}", "{}")
     with pytest.raises(InvalidInput):
-        log.append("f", expected_version=1, build=lambda m: ["not an event"])  # type: ignore[list-item]
+        append_one(log, "f", expected_version=1, build=lambda m: ["not an event"])  # type: ignore[list-item]
     with pytest.raises(InvalidInput):
-        log.append("f", expected_version=1, build=lambda m: [NewEvent("", "{}")])
+        append_one(log, "f", expected_version=1, build=lambda m: [NewEvent("", "{}")])
     assert log.get_fleet("f").version == 1
 
 
 def test_empty_build_is_a_no_op(log: EventLog) -> None:
     log.create_fleet("f", "grid", "{}", "{}")
-    result = log.append("f", expected_version=1, build=lambda m: [], idempotency_key="k")
+    result = append_one(log, "f", expected_version=1, build=lambda m: [], idempotency_key="k")
     assert (result.version, result.events) == (1, ())
-    again = log.append("f", expected_version=1, build=lambda m: [target(1)], idempotency_key="k")
+    again = append_one(
+        log, "f", expected_version=1, build=lambda m: [target(1)], idempotency_key="k"
+    )
     assert not again.duplicate and again.version == 2
 
 
 def test_idempotent_retry_returns_stored_batch(log: EventLog) -> None:
     log.create_fleet("f", "grid", "{}", "{}")
-    first = log.append(
+    first = append_one(
+        log,
         "f",
         expected_version=1,
         build=lambda m: [target(1), target(2)],
         idempotency_key="req-1",
         request_hash="h1",
     )
-    log.append("f", expected_version=3, build=lambda m: [target(3)])
+    append_one(log, "f", expected_version=3, build=lambda m: [target(3)])
 
     def never(missed: list[EventRecord]) -> list[NewEvent]:
         raise AssertionError("build must not run for a known key")
 
-    retry = log.append(
-        "f", expected_version=1, build=never, idempotency_key="req-1", request_hash="h1"
+    retry = append_one(
+        log, "f", expected_version=1, build=never, idempotency_key="req-1", request_hash="h1"
     )
     assert retry.duplicate
     assert retry.events == first.events
@@ -165,11 +171,13 @@ def test_idempotent_retry_returns_stored_batch(log: EventLog) -> None:
     assert retry.version == 4 and [e.seq for e in retry.missed] == [2, 3, 4]
     assert log.get_fleet("f").version == 4
     with pytest.raises(Conflict, match="another request"):
-        log.append("f", expected_version=4, build=never, idempotency_key="req-1", request_hash="h2")
+        append_one(
+            log, "f", expected_version=4, build=never, idempotency_key="req-1", request_hash="h2"
+        )
     # keys are per fleet
     log.create_fleet("g", "grid", "{}", "{}")
-    other = log.append(
-        "g", expected_version=1, build=lambda m: [target(9)], idempotency_key="req-1"
+    other = append_one(
+        log, "g", expected_version=1, build=lambda m: [target(9)], idempotency_key="req-1"
     )
     assert not other.duplicate
 
@@ -177,7 +185,7 @@ def test_idempotent_retry_returns_stored_batch(log: EventLog) -> None:
 def test_json_text_is_kept_byte_for_byte(log: EventLog) -> None:
     odd = '{ "x": 0.30000000000000004,  "y": 1e-310, "s": "Zürich \\u00e9 \U0001f695" }'
     log.create_fleet("f", "grid", odd, odd)
-    log.append("f", expected_version=1, build=lambda m: [NewEvent("target", odd, odd)])
+    append_one(log, "f", expected_version=1, build=lambda m: [NewEvent("target", odd, odd)])
     assert log.get_fleet("f").config_json == odd
     stored = log.events_since("f", 0)
     assert {stored[0].payload_json, stored[1].payload_json, stored[1].result_json} == {odd}
@@ -185,7 +193,8 @@ def test_json_text_is_kept_byte_for_byte(log: EventLog) -> None:
 
 def test_snapshots(log: EventLog) -> None:
     log.create_fleet("f", "grid", "{}", "{}")
-    log.append(
+    append_one(
+        log,
         "f",
         expected_version=1,
         build=lambda m: [target(1), target(2)],
@@ -193,7 +202,7 @@ def test_snapshots(log: EventLog) -> None:
     )
     fleet = log.get_fleet("f")
     assert (fleet.state_json, fleet.snapshot_version) == ('{"at": 3}', 3)
-    log.append("f", expected_version=3, build=lambda m: [target(3)], snapshot=lambda v: None)
+    append_one(log, "f", expected_version=3, build=lambda m: [target(3)], snapshot=lambda v: None)
     assert log.get_fleet("f").snapshot_version == 3
     assert log.save_snapshot("f", 4, '{"at": 4}')
     assert not log.save_snapshot("f", 2, '{"at": 2}')  # older than the stored one
@@ -204,7 +213,7 @@ def test_snapshots(log: EventLog) -> None:
 
 def test_event_pages(log: EventLog) -> None:
     log.create_fleet("f", "grid", "{}", "{}")
-    log.append("f", expected_version=1, build=lambda m: [target(n) for n in range(9)])
+    append_one(log, "f", expected_version=1, build=lambda m: [target(n) for n in range(9)])
     pages, after = [], 0
     while page := log.events("f", after=after, limit=4):
         pages.append([e.seq for e in page])
@@ -227,7 +236,7 @@ def test_soft_delete(log: EventLog) -> None:
     with pytest.raises(UnknownFleet):
         log.get_fleet("f")
     with pytest.raises(UnknownFleet):
-        log.append("f", expected_version=2, build=lambda m: [target(1)])
+        append_one(log, "f", expected_version=2, build=lambda m: [target(1)])
     with pytest.raises(UnknownFleet):
         log.delete_fleet("f")
     assert log.list_fleets() == []
@@ -240,7 +249,7 @@ def test_soft_delete(log: EventLog) -> None:
 
 def test_unknown_fleet_and_bad_arguments(log: EventLog) -> None:
     with pytest.raises(UnknownFleet):
-        log.append("ghost", expected_version=0, build=lambda m: [target(1)])
+        append_one(log, "ghost", expected_version=0, build=lambda m: [target(1)])
     with pytest.raises(UnknownFleet):
         log.get_fleet("ghost")
     with pytest.raises(UnknownFleet):
@@ -251,16 +260,16 @@ def test_unknown_fleet_and_bad_arguments(log: EventLog) -> None:
         log.create_fleet("x" * 129, "grid", "{}", "{}")
     log.create_fleet("f", "grid", "{}", "{}")
     with pytest.raises(InvalidInput):
-        log.append("f", expected_version=-1, build=lambda m: [])
+        append_one(log, "f", expected_version=-1, build=lambda m: [])
     with pytest.raises(InvalidInput):
-        log.append("f", expected_version=1, build=lambda m: [], idempotency_key="")
+        append_one(log, "f", expected_version=1, build=lambda m: [], idempotency_key="")
 
 
 def test_reopen_keeps_everything_and_integrity_holds(db_url: str) -> None:
     with open_event_log(db_url) as log:
         log.create_network("n", sha256=SHA, path="/p", name="n")
         log.create_fleet("f", "n", "{}", "{}")
-        log.append("f", expected_version=1, build=lambda m: [target(1)])
+        append_one(log, "f", expected_version=1, build=lambda m: [target(1)])
     with open_event_log(db_url) as log:  # migrations are already at head
         assert log.get_fleet("f").version == 2
         assert log.integrity_check() == []

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from routing_svc.store import AppendResult, EventLog, EventRecord, NewEvent, open_event_log
+from routing_svc.store import EventLog, EventRecord, GroupItem, NewEvent, open_event_log
+from tests.helpers import append_one
 
 BuildFn = Callable[[list[EventRecord]], list[NewEvent]]
 APPENDER = Path(__file__).with_name("appender_proc.py")
@@ -78,7 +79,7 @@ def failing_build(build: BuildFn, *, fail: bool) -> BuildFn:
     return maybe_failing
 
 
-def catch_up(cache: dict[str, int], result: AppendResult) -> None:
+def catch_up(cache: dict[str, int], result: GroupItem) -> None:
     for event in result.missed + result.events:
         if event.seq == cache["version"] + 1:
             cache["version"] = event.seq
@@ -100,7 +101,8 @@ def test_threads_append_in_one_order(db_url: str, *, shared_log: bool) -> None:
                     payload = json.dumps({"w": w, "i": i})
                     catch_up(
                         cache,
-                        log.append(
+                        append_one(
+                            log,
                             "f",
                             expected_version=cache["version"],
                             build=counting_build(cache, payload),
@@ -125,7 +127,7 @@ def test_threads_append_in_one_order(db_url: str, *, shared_log: bool) -> None:
 
 def test_concurrent_retries_apply_once(db_url: str) -> None:
     new_fleet(db_url)
-    results: list[AppendResult] = []
+    results: list[GroupItem] = []
     built = []
 
     def build(missed: list[EventRecord]) -> list[NewEvent]:
@@ -136,8 +138,13 @@ def test_concurrent_retries_apply_once(db_url: str) -> None:
 
         def retry() -> None:
             results.append(
-                log.append(
-                    "f", expected_version=1, build=build, idempotency_key="same", request_hash="h"
+                append_one(
+                    log,
+                    "f",
+                    expected_version=1,
+                    build=build,
+                    idempotency_key="same",
+                    request_hash="h",
                 )
             )
 
@@ -162,7 +169,9 @@ def test_failing_builds_among_threads_leave_no_trace(db_url: str) -> None:
                 for fail in chunk:
                     build = failing_build(counting_build(cache, "{}"), fail=fail)
                     with contextlib.suppress(ValueError):
-                        result = log.append("f", expected_version=cache["version"], build=build)
+                        result = append_one(
+                            log, "f", expected_version=cache["version"], build=build
+                        )
                         catch_up(cache, result)
 
             return run

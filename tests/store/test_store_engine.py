@@ -16,6 +16,7 @@ from routing_svc.errors import StorageError
 from routing_svc.store import EventLog, NewEvent, open_event_log
 from routing_svc.store.engine import create_store_engine
 from routing_svc.store.schema import metadata
+from tests.helpers import append_one
 
 
 def test_sqlite_connections_carry_the_durability_settings(tmp_path: Path) -> None:
@@ -63,7 +64,7 @@ def test_sqlite_writer_waits_for_the_lock_instead_of_failing(tmp_path: Path) -> 
 
         def writer() -> None:
             entered.set()
-            result = log.append("f", expected_version=1, build=lambda m: [NewEvent("t", "{}")])
+            result = append_one(log, "f", expected_version=1, build=lambda m: [NewEvent("t", "{}")])
             results.append(result.version)
 
         thread = threading.Thread(target=writer)
@@ -85,7 +86,7 @@ def test_sqlite_lock_timeout_is_a_storage_error(tmp_path: Path) -> None:
         holder.execute("BEGIN IMMEDIATE")
         try:
             with pytest.raises(StorageError, match="locked"):
-                log.append("f", expected_version=1, build=lambda m: [NewEvent("t", "{}")])
+                append_one(log, "f", expected_version=1, build=lambda m: [NewEvent("t", "{}")])
         finally:
             holder.execute("ROLLBACK")
             holder.close()

@@ -110,7 +110,7 @@ def test_the_pool_keeps_its_busy_timeout(sqlite_log: EventLog) -> None:
     opened = sqlite_log.try_append_groups_uncommitted(groups("a"))
     assert opened is not None
     opened.commit()
-    with sqlite_log._require().connect() as conn:
+    with sqlite_log.engine.connect() as conn:
         timeout = conn.exec_driver_sql("PRAGMA busy_timeout").scalar_one()
     assert timeout == sqlite_log.busy_timeout_ms
 
@@ -130,7 +130,7 @@ def test_a_failing_commit_writes_nothing_and_frees_the_lock(sqlite_log: EventLog
     error is raised, nothing of the transaction is stored, and the next append works."""
     opened = sqlite_log.try_append_groups_uncommitted(groups("a"))
     assert opened is not None
-    driver = opened._conn.connection.dbapi_connection
+    driver = opened.connection.connection.dbapi_connection
     assert driver is not None
     driver.execute("PRAGMA defer_foreign_keys = ON")
     driver.execute(

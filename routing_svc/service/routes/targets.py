@@ -14,7 +14,7 @@ from starlette.concurrency import run_in_threadpool
 
 from routing_svc.service.deadline import request_deadline
 from routing_svc.service.deps import IdempotencyKey, fleet_service
-from routing_svc.service.fleets import FleetService, Outcome
+from routing_svc.service.fleets import FleetService
 from routing_svc.service.responses import (
     CONFLICT,
     FOUND,
@@ -32,6 +32,7 @@ from routing_svc.service.target_route import (
     TARGETS_APPLIED,
     submit_target,
 )
+from routing_svc.service.write_path import PendingAnswer
 
 router = APIRouter(
     prefix=FLEET_PREFIX,
@@ -70,8 +71,8 @@ BATCH_RESPONSE: dict[int | str, dict[str, Any]] = (
 )
 
 
-Submit = Callable[[asyncio.AbstractEventLoop | None], Outcome]
-"""``submit(loop)`` queues a request (``loop``: see :meth:`FleetService.submit`)."""
+Submit = Callable[[asyncio.AbstractEventLoop | None], PendingAnswer]
+"""``submit(loop)`` queues a request (``loop``: see :meth:`GroupCommit.submit`)."""
 
 
 async def _committed(service: FleetService, fleet_id: str, submit: Submit) -> tuple[list[str], int]:
@@ -138,7 +139,7 @@ async def post_target_batch(
     """Serve a list of targets in order, in one transaction."""
     body = batch.model_dump(mode="json") if idempotency_key is not None else None
 
-    def submit(loop: asyncio.AbstractEventLoop | None) -> Outcome:
+    def submit(loop: asyncio.AbstractEventLoop | None) -> PendingAnswer:
         return service.submit_targets(
             fleet_id, batch.targets, idempotency_key=idempotency_key, body=body, loop=loop
         )

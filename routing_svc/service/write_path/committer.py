@@ -2,7 +2,7 @@
 
 The event loop stages a group's transaction itself and leaves only the commit
 (SQLite's ``fsync``) to this thread, so that the disk's wait overlaps the
-loop's work (see :mod:`routing_svc.service.fleets`). The thread needs the
+loop's work (see :mod:`routing_svc.service.write_path.group_commit`). The thread needs the
 interpreter lock for a few microseconds of Python before SQLite releases it,
 and CPython gives a waiting thread the lock only after the switch interval
 (5 ms) or when its holder blocks; under load the event loop blocks only when it
@@ -64,6 +64,12 @@ class Committer:
     def thread_name(self) -> str:
         """The name of the thread that runs the commits."""
         return self._thread.name
+
+    @property
+    def waiting(self) -> int:
+        """Commits handed over that the thread has not started yet (after :meth:`close`,
+        the stop counts as one)."""
+        return len(self._jobs)
 
     def hand_over(
         self, loop: asyncio.AbstractEventLoop, commit: Callable[[], None]
