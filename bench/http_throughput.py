@@ -21,8 +21,12 @@ Usage::
     python bench/http_throughput.py [--seconds 10] [--connections 16] [--rounds 5] [--probe F]
                          [--postgres URL] [--quick]
 
-The fleets use the service's defaults (the backward probe on); ``--probe 0`` measures the
-paper's rule alone.
+The same service with the single-target fast path off (``ROUTING_SVC_TARGET_FAST_PATH=false``)
+is loaded the same way in the same run, each against the trivial app in turns;
+``fast_path_gain`` is the ratio of the two services' ratios to the trivial app (the
+head-to-head that decides whether the fast path stays).
+
+The fleets use the service's defaults; ``--probe 0`` measures the paper's rule alone.
 
 Prints one JSON document.
 """
@@ -408,9 +412,28 @@ def main() -> int:
                 seconds=seconds, connections=args.connections, label="s",
                 baseline=f"http://127.0.0.1:{port}", rounds=args.rounds, probe=args.probe,
             )  # fmt: skip
+            # head to head: the same service with the single-target fast path off
+            route_env = {
+                **os.environ,
+                "DATABASE_URL": f"sqlite:///{tmp / 'bench_route.db'}",
+                "ROUTING_SVC_TARGET_FAST_PATH": "false",
+            }
+            report["sqlite_without_fast_path"] = bench_service(
+                env=route_env, net=args.net, tmp=tmp, instances=1, edge_ids=edge_ids,
+                seconds=seconds, connections=args.connections, label="r",
+                baseline=f"http://127.0.0.1:{port}", rounds=args.rounds, probe=args.probe,
+            )  # fmt: skip
         finally:
             stop(trivial)
         report["trivial"] = report["sqlite"].pop("baseline")
+        route_trivial = report["sqlite_without_fast_path"].pop("baseline")
+        report["fast_path_gain"] = (
+            report["sqlite"]["targets"]["requests_per_second"]
+            / report["trivial"]["requests_per_second"]
+        ) / (
+            report["sqlite_without_fast_path"]["targets"]["requests_per_second"]
+            / route_trivial["requests_per_second"]
+        )
         if args.postgres:
             pg_env = {**os.environ, "DATABASE_URL": args.postgres}
             for n in (1, 2):

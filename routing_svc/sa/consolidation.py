@@ -348,7 +348,7 @@ def consolidate(
         tested = test > 0
         if not tested.any():
             continue
-        challenger = _best_fit(costs, weight - part, [current, anchored])
+        challenger = best_fit(costs, weight - part, [current, anchored])
         differences.append((costs[challenger].min(axis=0) - now)[tested])
         weights.append(test[tested])
         tested_now.append(now[tested])
@@ -370,7 +370,7 @@ def consolidate(
             False, tuple(positions), tuple(updates), len(reservoir), before, before, gain,
             standard_error, fresh_before,
         )  # fmt: skip
-    chosen = _best_fit(costs, weight, [current, anchored])
+    chosen = best_fit(costs, weight, [current, anchored])
     ordered = _pair(current, chosen)
     chosen_costs = costs[ordered]
     owner = chosen_costs.argmin(axis=0)
@@ -449,7 +449,7 @@ def _distinct(rows: IntArray, n_sites: int) -> IntArray:
     return out
 
 
-def _best_fit(costs: FloatArray, weight: FloatArray, starts: list[IntArray]) -> IntArray:
+def best_fit(costs: FloatArray, weight: FloatArray, starts: list[IntArray]) -> IntArray:
     """The best local optimum for ``weight`` from each start and from greedy addition."""
     p = starts[0].size
     distinct = [

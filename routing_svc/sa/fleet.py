@@ -658,6 +658,12 @@ class Fleet(Generic[P]):
             return self.observe(target, requires)
         return self._observe_held(learning, policy, target, requires, recorded)
 
+    @property
+    def compiled_update(self) -> bool:
+        """Whether a target for any one vehicle goes through the space's compiled update
+        (:class:`~routing_svc.sa.space.SingleTargetServing`) rather than its methods."""
+        return self._serving() is not None
+
     def _serving(self) -> SingleTargetServing[P] | None:
         """The space's compiled update for this fleet (kept per space and config), or ``None``."""
         space = self.space

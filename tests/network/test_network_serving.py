@@ -127,7 +127,7 @@ def _assert_same_state(fleet: Fleet[NetPosition], reference: Fleet[NetPosition])
 @pytest.mark.parametrize("setup", SETUPS, ids=str)
 def test_compiled_update_equals_the_methods(case: NetCase, setup: Setup) -> None:
     fleet, reference = _fleets(case, setup, n=12, seed=7)
-    assert fleet._serving() is not None and reference._serving() is None
+    assert fleet.compiled_update and not reference.compiled_update
     rng = np.random.default_rng(8)
     counts: dict[str, int] = {"backed": 0, "moved_edge": 0, "entries": 0, "other": 0}
     for k in range(1500):

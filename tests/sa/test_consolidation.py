@@ -150,7 +150,7 @@ Fits = list[tuple[FloatArray, IntArray]]
 def spy_on_fits(monkeypatch: pytest.MonkeyPatch) -> Fits:
     """Record every ``(weight, rows)`` the solver fits, to price its challengers by hand."""
     real: Callable[[FloatArray, FloatArray, list[IntArray]], IntArray]
-    real = consolidation_module._best_fit
+    real = consolidation_module.best_fit
     fits: Fits = []
 
     def recording(costs: FloatArray, weight: FloatArray, starts: list[IntArray]) -> IntArray:
@@ -158,7 +158,7 @@ def spy_on_fits(monkeypatch: pytest.MonkeyPatch) -> Fits:
         fits.append((weight.copy(), rows.copy()))
         return rows
 
-    monkeypatch.setattr(consolidation_module, "_best_fit", recording)
+    monkeypatch.setattr(consolidation_module, "best_fit", recording)
     return fits
 
 

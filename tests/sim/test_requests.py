@@ -51,7 +51,13 @@ def test_ride_destinations_stay_within_the_radius(grid_net: Path) -> None:
     destinations = Destinations(network, uniform_by_length(network), radius=250.0)
     rng = np.random.default_rng(2)
     origin = network.edge_index["C2C3"]
-    xy = destinations._edge_xy
+    # each edge's place is the mean of its shape points
+    xy = np.array(
+        [
+            network.shape_xy[network.shape_offsets[e] : network.shape_offsets[e + 1]].mean(axis=0)
+            for e in range(network.n_edges)
+        ]
+    )
     for _ in range(50):
         to = destinations.draw(rng, origin)
         assert to.edge != origin
