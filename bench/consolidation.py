@@ -36,8 +36,8 @@ import numpy as np
 
 import routing_svc.sa.consolidation as consolidation
 from routing_svc.demand.network import hotspot_mixture
-from routing_svc.nets import resolve_network
 from routing_svc.network import RoadSpace, load_network
+from routing_svc.network.catalogue import resolve_network
 from routing_svc.sa.consolidation import Consolidation, ConsolidationPolicy, consolidate
 from routing_svc.types import FloatArray, NetPosition
 

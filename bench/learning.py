@@ -43,8 +43,8 @@ import numpy as np
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.demand.network import hotspot_mixture
-from routing_svc.nets import resolve_network
 from routing_svc.network import RoadSpace, load_network
+from routing_svc.network.catalogue import resolve_network
 from routing_svc.optimum import MAX_SITES, expected_cost, solve_demand, solve_pmedian
 from routing_svc.sa import Fleet, Objective, Rule, Vehicle, learning_config
 from routing_svc.types import FloatArray, NetPosition

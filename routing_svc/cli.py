@@ -17,10 +17,10 @@ from routing_svc.errors import RoutingSvcError
 COMMANDS: dict[str, tuple[str, str]] = {
     "serve": ("routing_svc.service.command", "run the REST service with the dashboard"),
     "replay": ("routing_svc.service.replay_command", "replay event logs, check bit for bit"),
-    "nets": ("routing_svc.nets", "list the generated and the eclipse-sumo networks"),
+    "nets": ("routing_svc.network.catalogue", "list the generated and the eclipse-sumo networks"),
     "import-osm": ("routing_svc.network.osm_command", "OpenStreetMap extract -> SUMO network"),
     "optimum": ("routing_svc.optimum.command", "exact / best-known p-median as JSON"),
-    "simulate": ("routing_svc.simulate", "offline SA run with the gap to the optimum"),
+    "simulate": ("routing_svc.offline_run", "offline SA run with the gap to the optimum"),
     "cosim": ("routing_svc.sim.command", "SUMO co-simulation of the fleet in traffic"),
     "paper": ("routing_svc.paper.command", "the paper's other scenarios as experiments"),
     "history": ("routing_svc.history.command", "import a history of calls; report service levels"),

@@ -6,7 +6,7 @@ Usage::
 
 Without ``--out`` the files go to the cache folder that the service uses
 (``$ROUTING_SVC_CACHE/nets``, else ``~/.cache/routing_svc/nets``). The recipes
-live in :mod:`routing_svc.nets`, so the installed package can make the same
+live in :mod:`routing_svc.network.catalogue`, so the installed package can make the same
 files on demand without this script.
 """
 
@@ -16,7 +16,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from routing_svc.nets import GENERATED, cache_dir, generate_network
+from routing_svc.network.catalogue import GENERATED, cache_dir, generate_network
 
 
 def main(argv: list[str] | None = None) -> int:

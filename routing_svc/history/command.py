@@ -124,7 +124,7 @@ def _entry(client: HistoryClient, network_id: str, net: str | None) -> NetworkEn
         raise InvalidInput(
             "with --service-url, --report needs --net PATH (the fleet's network file)"
         )
-    from routing_svc.nets import resolve_network
+    from routing_svc.network.catalogue import resolve_network
 
     registry = NetworkRegistry(data_dir=Path("."), max_bytes=1 << 30)
     return registry.load(network_id, resolve_network(net))
@@ -193,7 +193,7 @@ def run_create(args: argparse.Namespace) -> int:
         stack.callback(client.close)
         placed: PlacedCalls | None = None
         if sep:
-            from routing_svc.nets import resolve_network
+            from routing_svc.network.catalogue import resolve_network
 
             client.add_network(resolve_network(path), name=name)
         if isinstance(client, InProcessHistoryClient):

@@ -25,8 +25,8 @@ import numpy as np
 
 from routing_svc.demand.spec import network_demand, parse_demand_spec
 from routing_svc.errors import InvalidInput
-from routing_svc.nets import resolve_network
 from routing_svc.network import CompiledNetwork, RoadSpace, load_network
+from routing_svc.network.catalogue import resolve_network
 from routing_svc.network.costs import CostKind
 from routing_svc.optimum.evaluate import expected_cost
 from routing_svc.optimum.pmedian import Method
@@ -100,7 +100,7 @@ def optimum_report(
     Parameters
     ----------
     net : str
-        Network file (or a name known to ``routing_svc.nets``).
+        Network file (or a name known to ``routing_svc.network.catalogue``).
     vehicles : int
         ``p``, the number of vehicles (``>= 1``).
     demand : str

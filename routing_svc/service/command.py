@@ -89,7 +89,7 @@ def settings_env(args: argparse.Namespace) -> dict[str, str]:
     """The settings as environment variables, so that every uvicorn worker reads them."""
     import json
 
-    from routing_svc.nets import resolve_network
+    from routing_svc.network.catalogue import resolve_network
 
     if args.database_url and args.db:
         raise InvalidInput("give --db or --database-url, not both")

@@ -273,7 +273,7 @@ def _incidents(
 def prepare_seeds(spec: CosimSpec, *, out_dir: Path, progress: bool) -> Prepared:
     """Write every seed's inputs under ``out_dir/seed<k>`` and solve the optimum."""
     from routing_svc.demand import uniform_by_length
-    from routing_svc.nets import resolve_network
+    from routing_svc.network.catalogue import resolve_network
 
     net = resolve_network(spec.network).resolve()
     network = load_network(net)

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from routing_svc.history import InProcessHistoryClient
-from routing_svc.nets import resolve_network
 from routing_svc.network import CompiledNetwork, load_network
+from routing_svc.network.catalogue import resolve_network
 from routing_svc.network.snapping import point_on_edge
 
 DRT = resolve_network("drt")

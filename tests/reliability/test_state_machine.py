@@ -17,8 +17,8 @@ from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import Bundle, RuleBasedStateMachine, initialize, invariant, rule
 
-from routing_svc.nets import resolve_network
 from routing_svc.network import load_network
+from routing_svc.network.catalogue import resolve_network
 from routing_svc.service.app import create_app
 from routing_svc.service.settings import Settings
 

@@ -17,8 +17,8 @@ import routing_svc.sa.consolidation as consolidation_module
 from routing_svc.demand import DemandDistribution
 from routing_svc.demand.network import hotspot_mixture
 from routing_svc.errors import InvalidInput, ReplayMismatch, UnknownEdge
-from routing_svc.nets import resolve_network
 from routing_svc.network import RoadSpace, load_network
+from routing_svc.network.catalogue import resolve_network
 from routing_svc.optimum import expected_cost
 from routing_svc.sa import (
     COVERAGE,

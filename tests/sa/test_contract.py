@@ -8,8 +8,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from routing_svc.nets import resolve_network
 from routing_svc.network import RoadSpace, load_network
+from routing_svc.network.catalogue import resolve_network
 from routing_svc.sa import (
     ROUTING,
     Annealing,

@@ -24,8 +24,8 @@ import numpy as np
 import pytest
 
 from routing_svc.errors import InvalidInput
-from routing_svc.nets import resolve_network
 from routing_svc.network import CompiledNetwork, RoadSpace, load_network
+from routing_svc.network.catalogue import resolve_network
 from routing_svc.sa.held_step import Hold, JunctionSpace, held_step
 from routing_svc.sa.space import Requirement
 from routing_svc.types import NetPosition

@@ -15,7 +15,7 @@ import httpx
 import pytest
 from fastapi.testclient import TestClient
 
-from routing_svc.nets import resolve_network
+from routing_svc.network.catalogue import resolve_network
 from routing_svc.service.app import create_app
 from routing_svc.service.settings import Settings
 

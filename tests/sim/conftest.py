@@ -18,7 +18,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from routing_svc.nets import resolve_network
+from routing_svc.network.catalogue import resolve_network
 from routing_svc.sim import CosimResult, CosimSpec, parse_policies, run_cosim
 
 ALL_POLICIES = "sa,sa-cold,static,optimum,sumo-stop,sumo-circling"

@@ -54,8 +54,8 @@ def network_scenario(
 ) -> Scenario:
     """A road-network scenario (``net`` is a known name or a path)."""
     from routing_svc.demand.spec import network_demand, parse_demand_spec
-    from routing_svc.nets import resolve_network
     from routing_svc.network import RoadSpace, load_network
+    from routing_svc.network.catalogue import resolve_network
     from routing_svc.types import NetPosition
 
     network = load_network(resolve_network(net))

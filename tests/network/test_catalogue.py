@@ -11,7 +11,7 @@ import pytest
 import sumolib
 
 from routing_svc.errors import UnknownNetwork
-from routing_svc.nets import (
+from routing_svc.network.catalogue import (
     GENERATED,
     add_parser,
     cache_dir,
