@@ -3,7 +3,9 @@
 Fixtures live in the conftest of the package that uses them; what is here is
 plain functions and constants, imported as ``from tests.helpers import ...``.
 
-- The DRT network of the service tests, fleet bodies and seeded target streams.
+- The DRT network of the service tests, settings and live servers (``LiveServer``).
+- The reliability suite's scale, figures, replay and integrity checks.
+- Fleet bodies and seeded target streams.
 - Routes, metrics and event loops of the service.
 - What a client sees from a failing store (reliability tests).
 - Appends and event-log groups (store tests).
@@ -15,6 +17,9 @@ from __future__ import annotations
 import asyncio
 import itertools
 import json
+import os
+import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -30,7 +35,9 @@ from prometheus_client import REGISTRY
 
 from routing_svc.errors import RoutingSvcError
 from routing_svc.network import RoadSpace, load_network
+from routing_svc.network.catalogue import resolve_network
 from routing_svc.sa.space import Assignment, Requirement
+from routing_svc.service.settings import Settings
 from routing_svc.store import (
     BuildGroup,
     EventLog,
@@ -42,9 +49,144 @@ from routing_svc.store import (
 )
 from routing_svc.types import NetPosition
 from tests.network.conftest import NetCase
-from tests.service.conftest import DRT
 
-# --- the DRT network of the service tests: fleets and targets -------------------------
+# --- the DRT network of the service tests, live servers, the reliability suite -------
+
+DRT = str(resolve_network("drt"))
+
+
+def make_settings(db_url: str, tmp_path: Path, **extra: object) -> Settings:
+    return Settings(
+        database_url=db_url,
+        networks={"drt": DRT},
+        data_dir=tmp_path / "networks",
+        **extra,  # type: ignore[arg-type]
+    )
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+class LiveServer:
+    """``routing-svc serve`` in a subprocess (real uvicorn, real sockets); it keeps its port
+    across restarts, and ``extra`` options go to ``serve``."""
+
+    def __init__(
+        self, db_url: str, tmp_path: Path, *, workers: int = 1, extra: tuple[str, ...] = ()
+    ) -> None:
+        self.db_url = db_url
+        self.tmp_path = tmp_path
+        self.workers = workers
+        self.extra = extra
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        self.process: subprocess.Popen[bytes] | None = None
+        self.log = tmp_path / f"server-{self.port}.log"
+
+    def start(self) -> LiveServer:
+        env = {**os.environ, "DATABASE_URL": self.db_url}
+        cmd = [
+            sys.executable, "-m", "routing_svc.cli", "serve",
+            "--port", str(self.port), "--net", f"drt={DRT}", "--no-demo",
+            "--workers", str(self.workers), "--data-dir", str(self.tmp_path / "networks"),
+            "--log-level", "warning", *self.extra,
+        ]  # fmt: skip
+        with self.log.open("ab") as out:
+            self.process = subprocess.Popen(
+                cmd, env=env, stdout=out, stderr=subprocess.STDOUT, start_new_session=True
+            )
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if self.process.poll() is not None:
+                raise RuntimeError(f"server exited: {self.log.read_text()[-2000:]}")
+            try:
+                if httpx.get(self.url + "/healthz", timeout=1.0).status_code == 200:
+                    return self
+            except httpx.HTTPError:
+                pass
+            time.sleep(0.05)
+        raise RuntimeError(f"server did not start: {self.log.read_text()[-2000:]}")
+
+    def kill(self, sig: int = signal.SIGKILL) -> None:
+        assert self.process is not None
+        os.killpg(self.process.pid, sig)
+        self.process.wait(timeout=60)
+
+    def stop(self) -> None:
+        if self.process is not None and self.process.poll() is None:
+            self.kill(signal.SIGTERM)
+
+
+SCALE = float(os.environ.get("ROUTING_SVC_SOAK_SCALE", "1"))
+FIGURES: list[tuple[str, dict[str, Any]]] = []
+
+
+def scaled(value: float) -> int:
+    """``value`` times ``ROUTING_SVC_SOAK_SCALE``, at least 1."""
+    return max(1, round(value * SCALE))
+
+
+def record_figures(name: str, figures: dict[str, Any], directory: Path) -> None:
+    """Keep ``figures`` for the end-of-run summary and write them to ``directory``."""
+    FIGURES.append((name, figures))
+    (directory / f"{name}.json").write_text(json.dumps(figures, indent=2))
+    print(f"{name}: {json.dumps(figures)}")
+
+
+def vm_kib(pid: int, field: str) -> int:
+    """A ``/proc/PID/status`` field in KiB (``VmRSS``, ``VmHWM``)."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith(field + ":"):
+            return int(line.split()[1])
+    raise LookupError(field)
+
+
+def replay(db_url: str, tmp_path: Path) -> dict[str, Any]:
+    """``routing-svc replay --database-url URL``: must exit 0; its JSON report."""
+    out = subprocess.run(
+        [sys.executable, "-m", "routing_svc.cli", "replay", "--database-url", db_url,
+         "--data-dir", str(tmp_path / "networks")],
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stdout + out.stderr
+    report: dict[str, Any] = json.loads(out.stdout)
+    assert report["ok"] is True
+    return report
+
+
+def integrity(db_url: str) -> list[str]:
+    """``EventLog.integrity_check()`` (SQLite ``integrity_check`` and seq gaps)."""
+    with EventLog(db_url) as log:
+        return log.integrity_check()
+
+
+def serial_replay(db_url: str, tmp_path: Path, fleet_id: str) -> dict[str, Any]:
+    """The fleet as ``GET /v1/fleets/{id}`` shows it, rebuilt from its whole log, in order."""
+    from routing_svc.service.app import load_networks
+    from routing_svc.service.networks import NetworkRegistry
+    from routing_svc.service.runtime import FleetRuntime
+    from routing_svc.service.settings import Settings
+
+    settings = Settings(database_url=db_url, data_dir=tmp_path / "networks")
+    with EventLog(db_url) as log:
+        registry = NetworkRegistry(data_dir=settings.data_dir, max_bytes=settings.max_network_bytes)
+        load_networks(registry, log, settings)
+        events = log.events_since(fleet_id, 0)
+        entry = registry.get(log.get_fleet(fleet_id).network_id)
+    runtime = FleetRuntime(
+        fleet_id, entry, json.loads(events[0].payload_json), recent_window=settings.recent_window
+    )
+    for e in events[1:]:
+        runtime.replay(e.seq, e.kind, e.payload_json, e.result_json)
+    described: dict[str, Any] = json.loads(json.dumps(runtime.describe()))
+    return described
+
+
+# --- fleets and targets on DRT ----------------------------------------------------------
 
 NET = load_network(DRT)
 

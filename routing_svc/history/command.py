@@ -36,6 +36,7 @@ from routing_svc.history.replay import (
     replay_history,
 )
 from routing_svc.history.report import DEFAULT_THRESHOLDS, write_report
+from routing_svc.service.command import database_url_of
 from routing_svc.service.networks import NetworkEntry, NetworkRegistry
 from routing_svc.types import NetPosition
 
@@ -106,14 +107,7 @@ def _client(args: argparse.Namespace) -> HistoryClient:
         if args.db or args.database_url:
             raise InvalidInput("give --service-url or a database, not both")
         return HttpHistoryClient(args.service_url, api_key=args.api_key)
-    if args.db and args.database_url:
-        raise InvalidInput("give --db or --database-url, not both")
-    url = args.database_url or os.environ.get("DATABASE_URL")
-    if url is None:
-        db = args.db or Path("var/routing_svc.db")
-        db.parent.mkdir(parents=True, exist_ok=True)
-        url = f"sqlite:///{db.resolve()}"
-    return InProcessHistoryClient(database_url=url)
+    return InProcessHistoryClient(database_url=database_url_of(args.db, args.database_url))
 
 
 def _entry(client: HistoryClient, network_id: str, net: str | None) -> NetworkEntry:

@@ -85,19 +85,26 @@ BOUNDS = (
 :class:`~routing_svc.service.settings.Settings`."""
 
 
+def database_url_of(db: Path | None, database_url: str | None) -> str:
+    """The store's URL from ``--db`` or ``--database-url``, else ``$DATABASE_URL``, else
+    SQLite in ``var/routing_svc.db`` (its folder made)."""
+    if database_url and db:
+        raise InvalidInput("give --db or --database-url, not both")
+    url = database_url or os.environ.get("DATABASE_URL")
+    if url is None:
+        path = db or Path("var/routing_svc.db")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        url = f"sqlite:///{path.resolve()}"
+    return url
+
+
 def settings_env(args: argparse.Namespace) -> dict[str, str]:
     """The settings as environment variables, so that every uvicorn worker reads them."""
     import json
 
     from routing_svc.network.catalogue import resolve_network
 
-    if args.database_url and args.db:
-        raise InvalidInput("give --db or --database-url, not both")
-    url = args.database_url or os.environ.get("DATABASE_URL")
-    if url is None:
-        db = args.db or Path("var/routing_svc.db")
-        db.parent.mkdir(parents=True, exist_ok=True)
-        url = f"sqlite:///{db.resolve()}"
+    url = database_url_of(args.db, args.database_url)
     nets = dict(args.net) or {"drt": "drt"}
     resolved = {name: str(resolve_network(path)) for name, path in nets.items()}
     if args.demo_rate < 0:

@@ -15,7 +15,7 @@ from playwright.sync_api import Browser, sync_playwright
 
 from tests.dashboard.browser import CHROMIUM, CHROMIUM_ARGS, VIEWPORT, DashboardPage
 from tests.dashboard.service_client import ServiceClient
-from tests.service.conftest import LiveServer
+from tests.helpers import LiveServer
 
 
 @pytest.fixture(scope="module")

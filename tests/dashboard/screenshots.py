@@ -23,7 +23,7 @@ from playwright.sync_api import sync_playwright
 
 from tests.dashboard.browser import CHROMIUM, CHROMIUM_ARGS, VIEWPORT, DashboardPage
 from tests.dashboard.service_client import Edge, ServiceClient
-from tests.service.conftest import LiveServer
+from tests.helpers import LiveServer
 
 FLEET = "city"
 TYPES = ["A", "A", "A", "A", "B", "B", "B", "C", "C", "C"]

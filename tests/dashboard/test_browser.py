@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 from tests.dashboard.browser import LIVE_UPDATE_MS, LOAD_MS, DashboardPage
 from tests.dashboard.service_client import ServiceClient
-from tests.service.conftest import LiveServer
+from tests.helpers import LiveServer
 
 OpenDashboard = Callable[[LiveServer], DashboardPage]
 KEYBOARD_CONTROLS = {

@@ -11,7 +11,7 @@ from fastapi.testclient import TestClient
 
 from routing_svc.service.app import create_app
 from routing_svc.service.routes.dashboard import static_assets
-from tests.service.conftest import make_settings
+from tests.helpers import make_settings
 
 SVG_NAMESPACE = "http://www.w3.org/2000/svg"
 

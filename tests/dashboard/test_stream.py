@@ -13,7 +13,7 @@ import pytest
 
 from tests.dashboard.service_client import ServiceClient
 from tests.dashboard.sse import Message, messages, take_logs
-from tests.service.conftest import LiveServer
+from tests.helpers import LiveServer
 
 StartServer = Callable[..., LiveServer]
 Connect = Callable[[LiveServer], ServiceClient]

@@ -9,7 +9,7 @@ import numpy as np
 from routing_svc.network import RoadSpace, load_network
 from routing_svc.sa import Requirement
 from routing_svc.types import NetPosition
-from tests.service.conftest import DRT
+from tests.helpers import DRT
 
 
 def test_one_road_search_gives_both_answers_like_brute_force() -> None:

@@ -7,8 +7,7 @@ from pathlib import Path
 from fastapi.testclient import TestClient
 
 from routing_svc.service.app import create_app
-from tests.helpers import every_route, fast_answers, fleet_body, target_stream
-from tests.service.conftest import make_settings
+from tests.helpers import every_route, fast_answers, fleet_body, make_settings, target_stream
 
 ALLOWED = "https://dispatch.example"
 

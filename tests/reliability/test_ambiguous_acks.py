@@ -23,8 +23,7 @@ from pathlib import Path
 import httpx
 
 from routing_svc.store import EventLog
-from tests.helpers import fleet_body, target_stream
-from tests.reliability.conftest import Server, record_figures, replay, scaled
+from tests.helpers import LiveServer, fleet_body, record_figures, replay, scaled, target_stream
 
 CLIENT_TIMEOUT_S = 0.5
 HOLD_S = 0.8  # longer than the client timeout
@@ -103,7 +102,7 @@ class FaultyProxy:
 
 
 def test_lost_and_late_acks_apply_once_with_identical_answers(
-    server: Callable[..., Server], sqlite_url: str, tmp_path: Path
+    server: Callable[..., LiveServer], sqlite_url: str, tmp_path: Path
 ) -> None:
     live = server()
     httpx.post(live.url + "/v1/fleets", json=fleet_body()).raise_for_status()

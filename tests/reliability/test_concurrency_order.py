@@ -16,21 +16,22 @@ from pathlib import Path
 
 import httpx
 
-from tests.helpers import fleet_body, target_stream
-from tests.reliability.conftest import (
-    Server,
+from tests.helpers import (
+    LiveServer,
+    fleet_body,
     integrity,
     record_figures,
     replay,
     scaled,
     serial_replay,
+    target_stream,
 )
 
 CLIENTS = 16
 
 
 def test_sixteen_clients_two_workers_keep_order(
-    server: Callable[..., Server], sqlite_url: str, tmp_path: Path
+    server: Callable[..., LiveServer], sqlite_url: str, tmp_path: Path
 ) -> None:
     live = server(workers=2)
     httpx.post(live.url + "/v1/fleets", json=fleet_body()).raise_for_status()

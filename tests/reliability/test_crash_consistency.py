@@ -21,8 +21,16 @@ import httpx
 import numpy as np
 
 from routing_svc.store import EventLog
-from tests.helpers import fleet_body, target_stream
-from tests.reliability.conftest import SCALE, Server, integrity, record_figures, replay, scaled
+from tests.helpers import (
+    SCALE,
+    LiveServer,
+    fleet_body,
+    integrity,
+    record_figures,
+    replay,
+    scaled,
+    target_stream,
+)
 
 FLEETS = ("c1", "c2", "c3", "c4")
 
@@ -42,7 +50,7 @@ def stored_keys(db_url: str) -> dict[str, dict[str, int]]:
 
 
 def test_kill_9_under_load_keeps_exactly_once(
-    server: Callable[..., Server], sqlite_url: str, tmp_path: Path
+    server: Callable[..., LiveServer], sqlite_url: str, tmp_path: Path
 ) -> None:
     n_targets = scaled(1000)
     n_kills = max(1, round(3 * SCALE**0.824))  # scale 1 -> 3 kills, 10 -> 20 kills

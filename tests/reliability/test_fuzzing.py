@@ -30,8 +30,7 @@ from hypothesis import HealthCheck, seed, settings
 from schemathesis.config import SchemathesisConfig
 from schemathesis.schemas import BaseSchema
 
-from tests.helpers import fleet_body
-from tests.reliability.conftest import Server, scaled
+from tests.helpers import LiveServer, fleet_body, scaled
 
 DEFAULT_SEED = 20261125
 SEED = int(os.environ.get("ROUTING_SVC_FUZZ_SEED", str(DEFAULT_SEED)))
@@ -48,10 +47,10 @@ FUZZ_SETTINGS = settings(
 
 
 @pytest.fixture(scope="module")
-def live_api(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+def live_api(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     """A live server on its own SQLite file, with one fleet (``f1``) to find."""
     tmp = tmp_path_factory.mktemp("fuzzing")
-    server = Server(f"sqlite:///{tmp / 'events.db'}", tmp)
+    server = LiveServer(f"sqlite:///{tmp / 'events.db'}", tmp)
     try:
         server.start()
         httpx.post(server.url + "/v1/fleets", json=fleet_body(), timeout=60).raise_for_status()
@@ -61,7 +60,7 @@ def live_api(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
 
 
 @pytest.fixture(scope="module")
-def api_schema(live_api: Server) -> BaseSchema:
+def api_schema(live_api: LiveServer) -> BaseSchema:
     """The live server's OpenAPI document with the project's schemathesis configuration."""
     config = SchemathesisConfig.from_path(str(REPO / "schemathesis.toml"))
     config.update(seed=SEED, max_failures=None)

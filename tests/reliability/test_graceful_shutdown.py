@@ -18,14 +18,21 @@ from typing import Any
 import httpx
 
 from routing_svc.store import EventLog
-from tests.helpers import fleet_body, target_stream
-from tests.reliability.conftest import Server, integrity, record_figures, replay, scaled
+from tests.helpers import (
+    LiveServer,
+    fleet_body,
+    integrity,
+    record_figures,
+    replay,
+    scaled,
+    target_stream,
+)
 
 CLIENTS = 6
 
 
 def test_sigterm_under_load_commits_every_acknowledged_target(
-    server: Callable[..., Server], sqlite_url: str, tmp_path: Path
+    server: Callable[..., LiveServer], sqlite_url: str, tmp_path: Path
 ) -> None:
     live = server()
     httpx.post(live.url + "/v1/fleets", json=fleet_body()).raise_for_status()

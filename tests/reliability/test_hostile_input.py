@@ -19,8 +19,7 @@ from pathlib import Path
 import httpx
 
 from routing_svc.network.xml_limits import MAX_ATTRIBUTE_BYTES, MAX_ATTRIBUTES, MAX_TEXT_CHARS
-from tests.helpers import fleet_body
-from tests.reliability.conftest import Server, record_figures, vm_kib
+from tests.helpers import LiveServer, fleet_body, record_figures, vm_kib
 
 MiB = 1024 * 1024
 
@@ -45,7 +44,7 @@ def chunks(total: int) -> Iterator[bytes]:
 
 
 def test_hostile_inputs_are_rejected_fast_and_small(
-    server: Callable[..., Server], tmp_path: Path
+    server: Callable[..., LiveServer], tmp_path: Path
 ) -> None:
     live = server()
     listener = socket.socket()
@@ -154,7 +153,7 @@ def location_attributes(total: int) -> bytes:
 
 
 def test_xml_limits_hold_against_a_live_server(
-    server: Callable[..., Server], tmp_path: Path
+    server: Callable[..., LiveServer], tmp_path: Path
 ) -> None:
     """Issue 23: the four hostile uploads of 40 MiB (and 2 million attributes) and
     each limit just under (a real network that is accepted) and just over (422

@@ -22,14 +22,16 @@ from sqlalchemy.engine import make_url
 
 from tests.conftest import pg_url
 from tests.helpers import (
+    LiveServer,
     check_log,
     check_store_problem,
     fleet_body,
+    record_figures,
+    replay,
     settle_keys,
     target_stream,
     wait_health,
 )
-from tests.reliability.conftest import Server, record_figures, replay
 from tests.reliability.pgproxy import TcpProxy
 
 REQUEST_S = 1.5
@@ -64,8 +66,8 @@ def test_partition_bounded_answers_other_instance_serves_then_heal(
     started = time.monotonic()
     with TcpProxy(upstream.host, upstream.port) as proxy:
         via_proxy = upstream.set(port=proxy.port).render_as_string(hide_password=False)
-        b = Server(direct, tmp_path, extra=BOUNDS).start()
-        a = Server(via_proxy, tmp_path, extra=BOUNDS).start()
+        b = LiveServer(direct, tmp_path, extra=BOUNDS).start()
+        a = LiveServer(via_proxy, tmp_path, extra=BOUNDS).start()
         secrets = (upstream.host, str(proxy.port), str(upstream.port))
         keyed = {f"part-{i}": body for i, body in enumerate(target_stream(5, 40))}
         keys = iter(keyed)

@@ -29,14 +29,17 @@ from sqlalchemy.engine import make_url
 
 from tests.conftest import pg_url
 from tests.helpers import (
+    LiveServer,
     check_log,
     check_store_problem,
     fleet_body,
+    integrity,
+    record_figures,
+    replay,
     settle_keys,
     target_stream,
     wait_health,
 )
-from tests.reliability.conftest import Server, integrity, record_figures, replay
 from tests.reliability.pgproxy import TcpProxy
 
 
@@ -56,7 +59,7 @@ def test_full_sqlite_disk_then_more_space(tmp_path: Path, small_disk: Path) -> N
     db = small_disk / "events.db"
     db_url = f"sqlite:///{db}"
     bounds = ("--health-min-free-bytes", "32768", "--retry-after-s", "1")
-    live = Server(db_url, tmp_path, extra=bounds).start()
+    live = LiveServer(db_url, tmp_path, extra=bounds).start()
     started = time.monotonic()
     try:
         with httpx.Client(base_url=live.url, timeout=30) as http:
@@ -118,7 +121,7 @@ def test_postgresql_down_then_back(pg_database: str, pg_schema: str, tmp_path: P
     started = time.monotonic()
     with TcpProxy(upstream.host, upstream.port) as proxy:
         via_proxy = upstream.set(port=proxy.port).render_as_string(hide_password=False)
-        live = Server(via_proxy, tmp_path, extra=bounds).start()
+        live = LiveServer(via_proxy, tmp_path, extra=bounds).start()
         secrets = (upstream.host, f":{proxy.port}", str(proxy.port), "5432")
         try:
             with httpx.Client(base_url=live.url, timeout=30) as http:

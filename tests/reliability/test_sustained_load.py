@@ -13,14 +13,13 @@ from pathlib import Path
 import httpx
 import numpy as np
 
-from tests.helpers import fleet_body, target_stream
-from tests.reliability.conftest import Server, record_figures, scaled, vm_kib
+from tests.helpers import LiveServer, fleet_body, record_figures, scaled, target_stream, vm_kib
 
 RATE = 40.0
 RSS_GROWTH_BOUND_MIB = 50
 
 
-def test_steady_mixed_load(server: Callable[..., Server], tmp_path: Path) -> None:
+def test_steady_mixed_load(server: Callable[..., LiveServer], tmp_path: Path) -> None:
     live = server()
     assert live.process is not None
     duration = scaled(20)

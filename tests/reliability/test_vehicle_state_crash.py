@@ -19,8 +19,15 @@ import httpx
 import numpy as np
 
 from routing_svc.store import EventLog
-from tests.helpers import edge, fleet_body, target_stream
-from tests.reliability.conftest import Server, integrity, replay, serial_replay
+from tests.helpers import (
+    LiveServer,
+    edge,
+    fleet_body,
+    integrity,
+    replay,
+    serial_replay,
+    target_stream,
+)
 
 REQUESTS = 120
 KILLS = 2
@@ -47,7 +54,7 @@ def requests() -> list[tuple[str, str, dict[str, Any]]]:
 
 
 def test_kill_9_during_state_updates_keeps_exactly_once(
-    server: Callable[..., Server], sqlite_url: str, tmp_path: Path
+    server: Callable[..., LiveServer], sqlite_url: str, tmp_path: Path
 ) -> None:
     live = server()
     httpx.post(live.url + "/v1/fleets", json=fleet_body("s1")).raise_for_status()

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import pg_url
-from tests.service.conftest import LiveServer
+from tests.helpers import LiveServer
 
 
 @pytest.fixture

@@ -14,7 +14,7 @@ import pytest
 from routing_svc.cli import build_parser
 from routing_svc.service.command import settings_env
 from tests.conftest import libpq_conninfo
-from tests.service.conftest import DRT, LiveServer, free_port
+from tests.helpers import DRT, LiveServer, free_port
 
 MESSAGE = (
     "routing-svc serve: storage error: refusing to use a PostgreSQL server that can lose "

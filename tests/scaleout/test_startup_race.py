@@ -9,7 +9,7 @@ from routing_svc.service.app import load_networks
 from routing_svc.service.networks import NetworkRegistry
 from routing_svc.service.settings import Settings
 from routing_svc.store import EventLog, NetworkRecord
-from tests.service.conftest import DRT
+from tests.helpers import DRT
 
 
 def test_network_registered_by_a_peer_in_between(shared_pg_url: str, tmp_path: Path) -> None:

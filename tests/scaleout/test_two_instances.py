@@ -18,8 +18,7 @@ from typing import Any
 import httpx
 
 from routing_svc.service.write_path import SNAPSHOT_EVERY
-from tests.helpers import fleet_body, replay_ok, targets
-from tests.service.conftest import LiveServer
+from tests.helpers import LiveServer, fleet_body, replay_ok, targets
 
 FLEETS = ("f1", "f2")
 

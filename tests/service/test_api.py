@@ -10,8 +10,7 @@ from fastapi.testclient import TestClient
 
 from routing_svc.network import RoadSpace
 from routing_svc.types import NetPosition
-from tests.helpers import NET, edge, fleet_body
-from tests.service.conftest import DRT
+from tests.helpers import DRT, NET, edge, fleet_body
 
 SPACE = RoadSpace(NET, cost="length")
 

@@ -8,8 +8,7 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 
-from tests.helpers import NET, edge, every_route, fleet_body
-from tests.service.conftest import DRT
+from tests.helpers import DRT, NET, edge, every_route, fleet_body
 
 
 def assert_problem(r: Any, status: int, needle: str = "") -> None:

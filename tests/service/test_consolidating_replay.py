@@ -22,7 +22,7 @@ from routing_svc.demand.network import hotspot_mixture
 from routing_svc.network import load_network
 from routing_svc.service import replay_command
 from routing_svc.service.app import create_app
-from tests.service.conftest import DRT, make_settings
+from tests.helpers import DRT, make_settings
 
 NET = load_network(DRT)
 CHUNK = 50  # snapshots are stored when the version crosses a multiple of 64

@@ -9,8 +9,7 @@ from typing import Any
 
 import httpx
 
-from tests.helpers import fleet_body, replay_ok, targets
-from tests.service.conftest import LiveServer
+from tests.helpers import LiveServer, fleet_body, replay_ok, targets
 
 
 def test_concurrent_posts_two_workers(

@@ -9,8 +9,7 @@ from typing import Any
 
 import httpx
 
-from tests.helpers import fleet_body, targets
-from tests.service.conftest import LiveServer
+from tests.helpers import LiveServer, fleet_body, targets
 
 THREADS = 16
 PER_THREAD = 12

@@ -13,7 +13,7 @@ from routing_svc.demand import network as network_demand
 from routing_svc.network import RoadSpace, load_network
 from routing_svc.optimum.heterogeneous import RequirementClass, heterogeneous_cost
 from routing_svc.types import NetPosition
-from tests.service.conftest import DRT
+from tests.helpers import DRT
 
 NET = load_network(DRT)
 SPACE = RoadSpace(NET, cost="length")

@@ -15,8 +15,7 @@ import sqlalchemy as sa
 from routing_svc.service.inprocess import InProcessFleetClient
 from routing_svc.service.schemas import TargetSpec
 from routing_svc.service.write_path import Answer, PendingAnswer
-from tests.helpers import blocked_until, fleet_body, handoff_timeouts, run, targets
-from tests.service.conftest import DRT
+from tests.helpers import DRT, blocked_until, fleet_body, handoff_timeouts, run, targets
 
 
 @pytest.fixture

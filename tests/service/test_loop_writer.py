@@ -13,8 +13,7 @@ from pathlib import Path
 
 import httpx
 
-from tests.helpers import fleet_body, targets
-from tests.service.conftest import LiveServer
+from tests.helpers import LiveServer, fleet_body, targets
 
 
 def commits(metrics_text: str) -> dict[str, float]:
@@ -133,7 +132,7 @@ def test_start_up_objects_are_kept_out_of_full_collections(tmp_path: Path) -> No
     from fastapi.testclient import TestClient
 
     from routing_svc.service.app import create_app
-    from tests.service.conftest import make_settings
+    from tests.helpers import make_settings
 
     assert gc.get_freeze_count() == 0
     with TestClient(create_app(make_settings(f"sqlite:///{tmp_path / 'gc.db'}", tmp_path))) as c:

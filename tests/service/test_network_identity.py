@@ -19,8 +19,7 @@ from routing_svc.service.app import create_app
 from routing_svc.service.settings import Settings
 from routing_svc.store import EventLog
 from routing_svc.store.schema import networks
-from tests.helpers import NET, edge, fleet_body
-from tests.service.conftest import DRT
+from tests.helpers import DRT, NET, edge, fleet_body
 
 PLAIN = Path(DRT).read_bytes()
 IDENTITY = hashlib.sha256(PLAIN).hexdigest()

@@ -18,7 +18,7 @@ from fastapi.testclient import TestClient
 from routing_svc.network import RoadSpace, load_network
 from routing_svc.store.schema import events, fleets
 from routing_svc.types import NetPosition
-from tests.service.conftest import DRT
+from tests.helpers import DRT
 
 NET = load_network(DRT)
 SPACE = RoadSpace(NET, cost="length")

@@ -14,8 +14,7 @@ from routing_svc.errors import UnknownFleet
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.inprocess import InProcessFleetClient
 from routing_svc.service.schemas import TargetSpec
-from tests.helpers import fleet_body, targets
-from tests.service.conftest import DRT
+from tests.helpers import DRT, fleet_body, targets
 
 
 @pytest.fixture

@@ -66,25 +66,15 @@ async def put_vehicle_state(
     return await _apply(service, fleet_id, [change], body, idempotency_key)
 
 
-@router.post("/state:batch", response_model=VehicleStateResult, responses=STATE_ERRORS)
-async def post_vehicle_states(
-    fleet_id: str,
-    batch: VehicleStateBatch,
-    service: Service,
-    idempotency_key: IdempotencyKey = None,
-) -> dict[str, Any]:
-    """Set many vehicles' states in order, all or none (one event)."""
-    body = batch.model_dump(mode="json", exclude_unset=True)
-    return await _apply(service, fleet_id, batch.changes, body, idempotency_key)
-
-
 @router.put("/state", response_model=VehicleStateResult, responses=STATE_ERRORS)
+@router.post("/state:batch", response_model=VehicleStateResult, responses=STATE_ERRORS)
 async def put_vehicle_states(
     fleet_id: str,
     batch: VehicleStateBatch,
     service: Service,
     idempotency_key: IdempotencyKey = None,
 ) -> dict[str, Any]:
-    """The batch form as a ``PUT`` (same as ``POST .../vehicles/state:batch``)."""
+    """Set many vehicles' states in order, all or none (one event); ``PUT .../state`` and
+    ``POST .../state:batch`` are the same operation."""
     body = batch.model_dump(mode="json", exclude_unset=True)
     return await _apply(service, fleet_id, batch.changes, body, idempotency_key)
