@@ -173,10 +173,11 @@ class NetworkRegistry:
             self._entries[network_id] = entry
             return entry
 
-    def store_upload(self, data: bytes | bytearray) -> tuple[str, Path]:
+    def store_upload(self, data: bytes | bytearray) -> tuple[str, Path, bool]:
         """Check an uploaded network and write it under ``data_dir``; return its identity
         (:func:`~routing_svc.network.identity.network_sha256`, the same for the ``.gz``
-        and the plain file) and path.
+        and the plain file), its path and whether this call wrote the file (so that a
+        caller that then refuses the network can take it back, :meth:`discard_upload`).
 
         An upload whose root element is ``<osm>`` is an OpenStreetMap extract: it is
         screened with the same limits and converted by netconvert
@@ -194,8 +195,15 @@ class NetworkRegistry:
         digest = network_sha256(xml)
         self.data_dir.mkdir(parents=True, exist_ok=True)
         path = self.data_dir / f"{digest}.net.xml"
-        if not path.exists():
-            tmp = path.with_suffix(".tmp")
-            tmp.write_bytes(xml)
-            tmp.replace(path)
-        return digest, path
+        if path.exists():
+            return digest, path, False
+        tmp = path.with_suffix(".tmp")
+        tmp.write_bytes(xml)
+        tmp.replace(path)
+        return digest, path, True
+
+    def discard_upload(self, path: Path) -> None:
+        """Remove an uploaded file that no registered network uses (a refused upload)."""
+        with self._lock:
+            if all(entry.path != path for entry in self._entries.values()):
+                path.unlink(missing_ok=True)

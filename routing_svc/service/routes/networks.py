@@ -114,17 +114,22 @@ async def upload_network(
     data = await read_limited(request, registry.max_bytes)
 
     def register() -> dict[str, Any]:
-        digest, path = registry.store_upload(data)
+        digest, path, written = registry.store_upload(data)
         network_id = name or digest[:12]
-        if network_id in registry:
-            existing = registry.get(network_id)
-            if existing.network.source_sha256 != digest:
-                raise Conflict(f"network {network_id!r} exists with other content")
-            response.status_code = 200
-            return existing.summary()
-        entry = registry.load(network_id, path, name=name or network_id)
-        service.log.create_network(network_id, sha256=digest, path=str(path), name=entry.name)
-        return entry.summary()
+        try:
+            if network_id in registry:
+                existing = registry.get(network_id)
+                if existing.network.source_sha256 != digest:
+                    raise Conflict(f"network {network_id!r} exists with other content")
+                response.status_code = 200
+                return existing.summary()
+            entry = registry.load(network_id, path, name=name or network_id)
+            service.log.create_network(network_id, sha256=digest, path=str(path), name=entry.name)
+            return entry.summary()
+        except BaseException:
+            if written:  # a refused upload leaves nothing behind
+                registry.discard_upload(path)
+            raise
 
     return await run_in_threadpool(register)
 
