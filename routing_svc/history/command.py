@@ -22,12 +22,17 @@ import json
 import os
 from contextlib import ExitStack
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from routing_svc.errors import InvalidInput
 from routing_svc.history.calls import read_calls
 from routing_svc.history.creation import history_fleet_spec
-from routing_svc.history.places import PlacedCalls, place_locally, place_remotely
+from routing_svc.history.places import (
+    PlacedCalls,
+    place_locally,
+    place_on_network,
+    place_remotely,
+)
 from routing_svc.history.replay import (
     DEFAULT_CHUNK,
     HistoryClient,
@@ -190,12 +195,12 @@ def run_create(args: argparse.Namespace) -> int:
             from routing_svc.network.catalogue import resolve_network
 
             client.add_network(resolve_network(path), name=name)
-        if isinstance(client, InProcessHistoryClient):
-            entry = client.service.network(name)
-            placed = place_locally(table, entry, vehicle_types=None)
-            bad = placed.bad
+        if isinstance(client, HttpHistoryClient):
+            placed = place_on_network(table, client, name, progress=not args.quiet)
         else:
-            bad = table.bad
+            entry = cast(InProcessHistoryClient, client).service.network(name)
+            placed = place_locally(table, entry, vehicle_types=None)
+        bad = placed.bad
         if bad and args.on_bad_row == "refuse":
             from routing_svc.history.replay import HistoryRefused
 

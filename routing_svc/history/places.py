@@ -11,7 +11,9 @@ learns exactly from the checked positions:
   the fleet uses for every target);
 - against a server (:func:`place_remotely`): ``POST /v1/fleets/{id}/assign``
   for each distinct place and requirement, which resolves the place, checks the
-  types and changes nothing; its answer gives the position.
+  types and changes nothing; its answer gives the position;
+- against a server, before the fleet exists (:func:`place_on_network`):
+  ``POST /v1/networks/{id}/positions:resolve``, the places only.
 
 A row fails when its place is off the map (farther than ``SNAP_DISTANCE_M`` from
 every usable edge, or an edge the network does not use, an offset past the
@@ -23,6 +25,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -34,7 +37,7 @@ from routing_svc.errors import InvalidInput, NotFound, OffNetwork, RoutingSvcErr
 from routing_svc.history.calls import BadRow, CallTable
 from routing_svc.sa.requirements import build_requirement
 from routing_svc.service.networks import SNAP_DISTANCE_M, NetworkEntry
-from routing_svc.service.schemas import EdgePosition
+from routing_svc.service.schemas import MAX_RESOLVED_POSITIONS, EdgePosition
 from routing_svc.types import NetPosition
 
 SNAP_BLOCK = 65_536
@@ -169,5 +172,54 @@ def place_remotely(
         rows.append(row)
         edges.append(found[0])
         offsets.append(found[1])
+    bad.sort(key=lambda r: r.line)
+    return PlacedCalls(np.asarray(rows, dtype=np.int64), edges, offsets, bad)
+
+
+class PositionResolver(Protocol):
+    """A client that resolves positions on a network of the service."""
+
+    def resolve_positions(
+        self, network_id: str, positions: list[dict[str, Any]]
+    ) -> dict[str, Any]: ...
+
+
+def place_on_network(
+    table: CallTable, client: PositionResolver, network_id: str, *, progress: bool = True
+) -> PlacedCalls:
+    """Resolve every row's place with the server's ``positions:resolve`` (once per distinct
+    place, :data:`MAX_RESOLVED_POSITIONS` at a time); required types are not checked."""
+    bad = list(table.bad)
+    distinct: dict[tuple[object, ...], int] = {}
+    places: list[dict[str, Any]] = []
+    keys: list[tuple[object, ...]] = []
+    for row in range(len(table)):
+        place = table.place(row)
+        key = tuple(place.values())
+        keys.append(key)
+        if key not in distinct:
+            distinct[key] = len(places)
+            places.append(place)
+    found: list[tuple[str, float] | str] = []
+    blocks = range(0, len(places), MAX_RESOLVED_POSITIONS)
+    for lo in tqdm(blocks, disable=not progress, file=sys.stderr, unit="block"):
+        answer = client.resolve_positions(network_id, places[lo : lo + MAX_RESOLVED_POSITIONS])
+        reasons = {int(u["index"]): str(u["detail"]) for u in answer["unresolved"]}
+        for i, position in enumerate(answer["positions"]):
+            if position is None:
+                found.append(reasons.get(i, "not on the network"))
+            else:
+                found.append((str(position["edge"]), float(position["offset"])))
+    rows: list[int] = []
+    edges: list[str] = []
+    offsets: list[float] = []
+    for row, key in enumerate(keys):
+        result = found[distinct[key]]
+        if isinstance(result, str):
+            bad.append(BadRow(int(table.lines[row]), result))
+            continue
+        rows.append(row)
+        edges.append(result[0])
+        offsets.append(result[1])
     bad.sort(key=lambda r: r.line)
     return PlacedCalls(np.asarray(rows, dtype=np.int64), edges, offsets, bad)

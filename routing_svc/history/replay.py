@@ -86,6 +86,15 @@ class HttpHistoryClient(HttpFleetClient):
         )
         return list(answer["results"]), int(answer["version"])
 
+    def resolve_positions(self, network_id: str, positions: list[dict[str, Any]]) -> dict[str, Any]:
+        """``POST /v1/networks/{id}/positions:resolve``: each position on the network, or
+        why not."""
+        return self._json(
+            self._http.post(
+                f"/v1/networks/{network_id}/positions:resolve", json={"positions": positions}
+            )
+        )
+
 
 class HistoryRefused(InvalidInput):
     """The history has bad rows and ``--on-bad-row refuse``: nothing was sent."""

@@ -362,6 +362,21 @@ class NetworkAnswer(Answer):
     vclass: str
 
 
+class UnresolvedPosition(Answer):
+    """A position of the request that is not on the network, and why."""
+
+    index: int
+    detail: str
+
+
+class ResolvedPositions(Answer):
+    """Each position of the request on the network, in order (``null`` where it is not),
+    and why the others are not."""
+
+    positions: list[DescribedPosition | None]
+    unresolved: list[UnresolvedPosition]
+
+
 class NetworkList(Answer):
     """Every network."""
 

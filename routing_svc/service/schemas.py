@@ -44,6 +44,15 @@ class LonLatPosition(Strict):
 
 Position = EdgePosition | XYPosition | LonLatPosition
 
+MAX_RESOLVED_POSITIONS = 10_000
+"""The most positions one ``positions:resolve`` request may carry."""
+
+
+class PositionBatch(Strict):
+    """Positions to resolve on a network (edge/offset, x/y or lon/lat each)."""
+
+    positions: Annotated[list[Position], Field(min_length=1, max_length=MAX_RESOLVED_POSITIONS)]
+
 
 class StepSpec(Strict):
     kind: Literal["inverse", "constant"] = "inverse"

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
+import httpx
 import pytest
 
 from routing_svc.history import (
@@ -174,3 +176,27 @@ def test_a_rerun_after_a_crash_applies_each_chunk_once(
     assert (again.applied, again.version_after) == (0, 51)
     assert client.get_fleet("f") == state
     assert list(again.costs) == list(resumed.costs)  # the stored answers
+
+
+def test_a_live_server_creates_the_fleet_the_process_creates_skipping_the_same_rows(
+    tmp_path: Path, drt: CompiledNetwork, live_server: Callable[[], str]
+) -> None:
+    path = _file_with_bad_rows(tmp_path, drt)
+    create = ["history", "create-fleet", str(path), "--fleet", "f", "--vehicles", "2", "--quiet"]
+    local = cli(
+        *create, "--net", "drt=drt", "--db", str(tmp_path / "local.db"), "--on-bad-row", "skip"
+    )
+    assert local.returncode == 0, local.stderr
+    url = live_server()
+    remote = [*create, "--net", "drt", "--service-url", url]
+    refused = cli(*remote)
+    assert refused.returncode == 2
+    assert all(f"line {n}:" in refused.stderr for n in (3, 5, 9))
+    assert httpx.get(f"{url}/v1/fleets/f").status_code == 404  # nothing was created
+    skipped = cli(*remote, "--on-bad-row", "skip")
+    assert skipped.returncode == 0, skipped.stderr
+    # the same rows are left out (required types are not checked when a fleet is created),
+    # so the same sample gives the same fleet
+    lines = [[r["line"] for r in json.loads(out.stdout)["bad_rows"]] for out in (skipped, local)]
+    assert lines == [[3, 5, 9], [3, 5, 9]]
+    assert json.loads(skipped.stdout)["vehicles"] == json.loads(local.stdout)["vehicles"]

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Depends, Query, Request, Response
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
-from routing_svc.errors import Conflict, PayloadTooLarge
+from routing_svc.errors import Conflict, InvalidInput, NotFound, OffNetwork, PayloadTooLarge
 from routing_svc.service.deps import fleet_service, network_registry
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.networks import NetworkRegistry
@@ -20,8 +20,9 @@ from routing_svc.service.responses import (
     Geometry,
     NetworkAnswer,
     NetworkList,
+    ResolvedPositions,
 )
-from routing_svc.service.schemas import Identifier
+from routing_svc.service.schemas import Identifier, PositionBatch
 
 router = APIRouter(
     prefix="/v1/networks",
@@ -158,3 +159,30 @@ async def get_geometry(
     """GeoJSON of the usable edges, in the network's own coordinates."""
     entry = await run_in_threadpool(service.network, network_id)
     return await run_in_threadpool(entry.geometry)
+
+
+@router.post(
+    "/{network_id}/positions:resolve", response_model=ResolvedPositions, responses=WRITE | FOUND
+)
+async def resolve_positions(
+    network_id: str,
+    batch: PositionBatch,
+    service: Annotated[FleetService, Depends(fleet_service)],
+) -> dict[str, Any]:
+    """Where each position lies on the network, as targets are resolved (an edge and offset,
+    or the nearest usable edge within the snapping distance of an x/y or lon/lat point);
+    a position that is not on it is listed with the reason. Changes nothing."""
+    entry = await run_in_threadpool(service.network, network_id)
+
+    def resolve() -> dict[str, Any]:
+        positions: list[dict[str, Any] | None] = []
+        unresolved: list[dict[str, Any]] = []
+        for index, position in enumerate(batch.positions):
+            try:
+                positions.append(entry.describe(entry.resolve(position)))
+            except (InvalidInput, NotFound, OffNetwork) as exc:
+                positions.append(None)
+                unresolved.append({"index": index, "detail": exc.detail})
+        return {"positions": positions, "unresolved": unresolved}
+
+    return await run_in_threadpool(resolve)
