@@ -37,6 +37,18 @@ def test_a_fleet_with_stands(live_server: Callable[..., LiveServer]) -> None:
     assert batch.status_code == 200, batch.text
     before = httpx.get(server.url + "/v1/fleets/f1").json()
     assert before["targets"] == 300
+    # started at the optimum of a sample: at the optimum over the stands
+    sample = [t["position"] for t in targets(4, 30)]
+    vehicles = [{"id": v["id"]} for v in body["vehicles"]]
+    started = httpx.post(
+        server.url + "/v1/fleets",
+        json={**body, "id": "f3", "vehicles": vehicles, "start": {"optimum": {"sample": sample}}},
+    )
+    assert started.status_code == 201, started.text
+    stand_places = {(s["edge"], s["offset"]) for s in stored}
+    at = [(v["position"]["edge"], v["position"]["offset"]) for v in started.json()["vehicles"]]
+    assert set(at) <= stand_places
+    assert at.count((edge(50), 1.0)) <= 1 and at.count((edge(200), 0.5)) <= 1
     server.stop()
     again = live_server()  # a second server restores the fleet from the log
     after = httpx.get(again.url + "/v1/fleets/f1").json()
