@@ -106,6 +106,9 @@ def main() -> int:
     parser.add_argument("--sizes", default="8,20")
     parser.add_argument("--seeds", default="0,1")
     parser.add_argument("--targets", type=int, default=max(CHECKPOINTS))
+    parser.add_argument(
+        "--demands", default="hotspots,buildings", help="of hotspots, buildings (comma-separated)"
+    )
     args = parser.parse_args()
     network = load_network(Path(args.net))
     space = RoadSpace(network)
@@ -116,7 +119,8 @@ def main() -> int:
     sizes = [int(v) for v in args.sizes.split(",")]
     seeds = [int(v) for v in args.seeds.split(",")]
     cases: list[dict[str, Any]] = []
-    for spec in DEMANDS:
+    chosen = args.demands.split(",")
+    for spec in (d for d in DEMANDS if d.split(":")[0] in chosen):
         for seed in seeds:
             demand = network_demand(
                 network, parse_demand_spec(spec), rng=np.random.default_rng([seed, 0])

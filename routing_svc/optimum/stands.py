@@ -6,22 +6,25 @@ over multisets ``S`` of ``p`` stands with each stand at most its capacity times
 (objective (11) of Le Ny & Pappas with the sites restricted). As
 :mod:`routing_svc.sa.stands` argues, it opens ``min(p, n_stands)`` distinct
 stands, solved by :func:`~routing_svc.optimum.pmedian.solve_pmedian` on the
-cost matrix from the stands to the demand's atoms, and parks the other vehicles
+cost matrix from the stands to the demand's atoms (an answer its exact method could
+not prove optimal in time then goes through the variable neighbourhood search), and
+parks the other vehicles
 where capacity is free (:func:`~routing_svc.sa.stands.capacitated_sites`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.optimum.evaluate import CostModel
-from routing_svc.optimum.pmedian import Method, PMedianSolution, solve_pmedian
+from routing_svc.optimum.pmedian import Method, PMedianSolution, objective, solve_pmedian
 from routing_svc.optimum.solve import DemandOptimum, P
+from routing_svc.sa.interchange import neighbourhood_search
 from routing_svc.sa.stands import StandSet, capacitated_sites
-from routing_svc.types import IntArray
+from routing_svc.types import FloatArray, IntArray
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,8 +59,26 @@ def solve_stands(
     solutions: list[PMedianSolution] = []
 
     def solve(k: int) -> IntArray:
-        solutions.append(solve_pmedian(matrix, weights, k, method=method, time_limit=time_limit))
+        solutions.append(
+            polished(
+                solve_pmedian(matrix, weights, k, method=method, time_limit=time_limit),
+                matrix,
+                weights,
+            )
+        )
         return np.array(solutions[0].sites, dtype=np.int64)
 
     slots = capacitated_sites(matrix, weights, stands.capacities, p, solve)
     return StandOptimum([sites[i] for i in slots.tolist()], sites, matrix, solutions[0], slots)
+
+
+def polished(solution: PMedianSolution, matrix: FloatArray, weights: FloatArray) -> PMedianSolution:
+    """An unproven solution after the variable neighbourhood search
+    (:func:`~routing_svc.sa.interchange.neighbourhood_search`), kept if it is better."""
+    if solution.proven_optimal:
+        return solution
+    sites = neighbourhood_search(matrix, weights, np.array(solution.sites, dtype=np.int64))
+    value = objective(matrix, weights, sites)
+    if not value < solution.objective:
+        return solution
+    return replace(solution, sites=tuple(sorted(int(i) for i in sites)), objective=value)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections import Counter
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -15,7 +16,8 @@ from routing_svc.errors import InvalidInput
 from routing_svc.nets import resolve_network
 from routing_svc.network import RoadSpace, load_network
 from routing_svc.optimum import expected_cost, solve_demand
-from routing_svc.optimum.stands import solve_stands
+from routing_svc.optimum.pmedian import PMedianSolution, objective
+from routing_svc.optimum.stands import polished, solve_stands
 from routing_svc.sa.stands import StandSet
 from routing_svc.types import NetPosition
 
@@ -94,3 +96,21 @@ def test_more_vehicles_than_the_stands_hold() -> None:
     stands = random_stands(6, (2, 1))
     with pytest.raises(InvalidInput, match="exceed the total capacity 3"):
         solve_stands(SPACE, small_demand(6, 10), 4, stands)
+
+
+def test_an_unproven_answer_is_polished_and_a_proven_one_kept() -> None:
+    rng = np.random.default_rng(7)
+    matrix, weights = rng.exponential(10.0, size=(12, 30)), rng.random(30)
+    poor = max(
+        itertools.combinations(range(12), 3), key=lambda s: objective(matrix, weights, list(s))
+    )
+    unproven = PMedianSolution(
+        poor, objective(matrix, weights, list(poor)), "milp", False, 1.0, 0.5
+    )
+    better = polished(unproven, matrix, weights)
+    assert better.objective < unproven.objective
+    assert better.objective == objective(matrix, weights, list(better.sites))
+    assert len(set(better.sites)) == 3
+    assert (better.method, better.proven_optimal, better.lower_bound) == ("milp", False, 0.5)
+    proven = replace(unproven, proven_optimal=True)
+    assert polished(proven, matrix, weights) is proven
