@@ -19,6 +19,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("routing_svc.service.replay_command", "replay event logs, check bit for bit"),
     "nets": ("routing_svc.network.catalogue", "list the generated and the eclipse-sumo networks"),
     "import-osm": ("routing_svc.network.osm_command", "OpenStreetMap extract -> SUMO network"),
+    "stands": ("routing_svc.network.stands_command", "the usable stands of a SUMO additional file"),
     "optimum": ("routing_svc.optimum.command", "exact / best-known p-median as JSON"),
     "simulate": ("routing_svc.offline_run", "offline SA run with the gap to the optimum"),
     "cosim": ("routing_svc.sim.command", "SUMO co-simulation of the fleet in traffic"),

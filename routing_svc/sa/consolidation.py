@@ -44,6 +44,7 @@ Each consolidation is recorded with the target that triggered it
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Generic, Protocol, runtime_checkable
@@ -53,6 +54,7 @@ import numpy as np
 from routing_svc.errors import InvalidInput
 from routing_svc.sa.interchange import fast_interchange, greedy
 from routing_svc.sa.space import P
+from routing_svc.sa.stands import StandSet, capacitated_sites, open_count, stand_assignment
 from routing_svc.types import FloatArray, IntArray
 
 MAX_SITE_TARGETS = 600
@@ -284,6 +286,7 @@ def consolidate(
     fresh: int,
     folds: int = 2,
     refit: bool = False,
+    stands: StandSet[P] | None = None,
 ) -> Consolidation[P]:
     """Solve the reservoir without each fold, test on that fold, solve all if it pays.
 
@@ -314,6 +317,11 @@ def consolidate(
         The references were fitted to a reservoir this one outgrows
         (:attr:`ConsolidationPolicy.refit`): solving all is taken unless the test finds
         it worse by more than one standard error.
+    stands : StandSet, optional
+        Solve over these stands only, with their capacities
+        (:func:`routing_svc.sa.stands.capacitated_sites`); the cost before is that of
+        the vehicles' stands (:func:`routing_svc.sa.stands.stand_assignment`), and the
+        references accepted are stands.
     """
     p = len(positions)
     if len(reservoir) < 2 or len(anchor) != p or len(updates) != p:
@@ -335,13 +343,20 @@ def consolidate(
         ).astype(np.float64)
         for f in range(folds)
     ]
-    stride = -(-len(targets) // MAX_SITE_TARGETS)
-    sites = space.candidate_references(targets[::stride], [*positions, *anchor])
-    row = {s: i for i, s in enumerate(sites)}
+    if stands is None:
+        stride = -(-len(targets) // MAX_SITE_TARGETS)
+        sites = space.candidate_references(targets[::stride], [*positions, *anchor])
+        row = {s: i for i, s in enumerate(sites)}
+        actual = np.array([row[x] for x in positions], dtype=np.int64)
+        current = _distinct(actual, len(sites))
+        anchored = _distinct(np.array([row[x] for x in anchor], dtype=np.int64), len(sites))
+    else:  # the vehicles serve from their stands, and only stands open
+        sites = list(stands.positions)
+        opened = open_count(p, len(sites))
+        actual = _stand_rows(space, stands, positions)
+        current = _padded(actual, opened, len(sites))
+        anchored = _padded(_stand_rows(space, stands, anchor), opened, len(sites))
     costs = (np.asarray(space.cost_matrix(sites, targets), dtype=np.float64) / speed) ** power
-    actual = np.array([row[x] for x in positions], dtype=np.int64)
-    current = _distinct(actual, len(sites))
-    anchored = _distinct(np.array([row[x] for x in anchor], dtype=np.int64), len(sites))
     now = costs[actual].min(axis=0)
     differences, weights, tested_now = [], [], []
     for part, test in zip(parts, tests, strict=True):
@@ -370,8 +385,17 @@ def consolidate(
             False, tuple(positions), tuple(updates), len(reservoir), before, before, gain,
             standard_error, fresh_before,
         )  # fmt: skip
-    chosen = best_fit(costs, weight, [current, anchored])
-    ordered = _pair(current, chosen)
+    if stands is None:
+        ordered = _pair(current, best_fit(costs, weight, [current, anchored]))
+    else:
+        slots = capacitated_sites(
+            costs,
+            weight,
+            stands.capacities,
+            p,
+            lambda _: best_fit(costs, weight, [current, anchored]),
+        )
+        ordered = _pair(actual, slots)
     chosen_costs = costs[ordered]
     owner = chosen_costs.argmin(axis=0)
     served = np.bincount(owner, weights=weight, minlength=p)
@@ -466,12 +490,30 @@ def _total(costs: FloatArray, weight: FloatArray, rows: IntArray) -> float:
 
 
 def _pair(current: IntArray, chosen: IntArray) -> IntArray:
-    """The chosen sites in vehicle order: a vehicle already on one keeps it, the others
-    take the rest in ascending order."""
-    free = sorted(set(chosen.tolist()) - set(current.tolist()))
-    keep = set(chosen.tolist())
-    out = [r if r in keep else -1 for r in current.tolist()]
+    """The chosen sites (a multiset) in vehicle order: a vehicle already on one keeps
+    it while it has room, the others take the rest in ascending order."""
+    room = Counter(chosen.tolist())
+    out = []
+    for r in current.tolist():
+        keeps = room[r] > 0
+        out.append(r if keeps else -1)
+        room[r] -= keeps
+    free = sorted(room.elements())
     for k, r in enumerate(out):
         if r < 0:
             out[k] = free.pop(0)
     return np.array(out, dtype=np.int64)
+
+
+def _stand_rows(space: SampleSpace[P], stands: StandSet[P], references: Sequence[P]) -> IntArray:
+    """Each reference's stand row (:func:`routing_svc.sa.stands.stand_assignment`)."""
+    costs = np.asarray(space.cost_matrix(list(stands.positions), list(references)))
+    return stand_assignment(costs.astype(np.float64), stands.capacities)
+
+
+def _padded(rows: IntArray, size: int, n_sites: int) -> IntArray:
+    """The distinct ``rows`` in order, then the lowest other rows up to ``size``."""
+    kept = list(dict.fromkeys(rows.tolist()))[:size]
+    taken = set(kept)
+    rest = (r for r in range(n_sites) if r not in taken)
+    return np.array([*kept, *(next(rest) for _ in range(size - len(kept)))], dtype=np.int64)

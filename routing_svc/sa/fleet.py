@@ -33,7 +33,7 @@ from __future__ import annotations
 import functools
 import math
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from itertools import compress, count
@@ -64,6 +64,7 @@ from routing_svc.sa.objectives import Objective
 from routing_svc.sa.requirements import build_requirement
 from routing_svc.sa.schedules import Counting, Schedule, schedule_from_dict
 from routing_svc.sa.space import DirectedSpace, P, Requirement, SingleTargetServing, Space
+from routing_svc.sa.stands import StandSet, vehicle_stands
 from routing_svc.sa.step_rule import probe_gains, probe_step
 
 """Relative gain below which a probe is taken as no better (rounding of equal paths)."""
@@ -133,6 +134,9 @@ class FleetConfig:
     learning_vehicles: LearningVehicles = LearningVehicles.ALL
     """Among which vehicles the closest reference moves (:class:`LearningVehicles`):
     all (the paper's eq. (10)) or the available ones only."""
+    stands: StandSet[Any] | None = None
+    """The stands the vehicles may park at (:mod:`routing_svc.sa.stands`): a
+    consolidation solves over them only, with their capacities; ``None``: anywhere."""
 
     def __post_init__(self) -> None:
         if self.consolidation is None and self.window is None:
@@ -151,7 +155,9 @@ class FleetConfig:
             return Rule.CONSOLIDATING
         return Rule.PAPER if self.probe is None else Rule.PROBE
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self, encode: Callable[[Any], dict[str, object]] | None = None) -> dict[str, Any]:
+        """The settings as JSON; ``encode`` writes the stands' positions (needed with
+        stands)."""
         data: dict[str, Any] = {
             "objective": self.objective.power,
             "step": self.schedule.to_dict(),
@@ -167,13 +173,23 @@ class FleetConfig:
             data["consolidation"] = self.consolidation.to_dict()
         if self.learning_vehicles is not LearningVehicles.ALL:
             data["learning_vehicles"] = self.learning_vehicles.value
+        if self.stands is not None:
+            if encode is None:
+                raise InvalidInput("writing a fleet's stands needs its space's encoder")
+            data["stands"] = self.stands.to_dict(encode)
         return data
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> FleetConfig:
+    def from_dict(
+        cls, data: dict[str, Any], decode: Callable[[dict[str, object]], Any] | None = None
+    ) -> FleetConfig:
         """Settings from :meth:`to_dict`; a dict without ``rule`` (stored before the
         rule existed) keeps the probe rule or the paper's, as it was; without
-        ``learning_vehicles``, all vehicles learn."""
+        ``learning_vehicles``, all vehicles learn; without ``stands``, vehicles park
+        anywhere (``decode`` reads the stands' positions)."""
+        stands = data.get("stands")
+        if stands is not None and decode is None:
+            raise InvalidInput("reading a fleet's stands needs its space's decoder")
         annealing = data.get("annealing")
         rule = Rule(data.get("rule", Rule.PROBE if data.get("probe") is not None else "paper"))
         consolidating = rule is Rule.CONSOLIDATING
@@ -190,6 +206,7 @@ class FleetConfig:
             if consolidating
             else None,
             learning_vehicles=LearningVehicles(data.get("learning_vehicles", "all")),
+            stands=None if stands is None or decode is None else StandSet.from_dict(stands, decode),
         )
 
 
@@ -336,6 +353,8 @@ class Fleet(Generic[P]):
             self.state.vehicle_states = [VehicleState() for _ in range(n)]
         if len(self.state.vehicle_states) != n:
             raise InvalidInput("one vehicle state per vehicle")
+        if self.config.stands is not None:
+            self.config.stands.check_fleet(n)
         self._speeds = np.array([v.speed for v in self.vehicles], dtype=np.float64)
         self._types = tuple(v.type for v in self.vehicles)
         self._index = {v.id: i for i, v in enumerate(self.vehicles)}
@@ -375,6 +394,16 @@ class Fleet(Generic[P]):
     def positions(self) -> dict[str, P]:
         """Every vehicle's reference position, by id."""
         return {v.id: p for v, p in zip(self.vehicles, self.state.positions, strict=True)}
+
+    def stands(self) -> dict[str, P]:
+        """Every vehicle's stand (:func:`routing_svc.sa.stands.stand_assignment`), by id;
+        a fleet without stands waits at its references."""
+        stands = self.config.stands
+        if stands is None:
+            return self.positions
+        space = cast(SampleSpace[P], self.space)
+        at = vehicle_stands(space.cost_matrix, stands, self.state.positions)
+        return {v.id: p for v, p in zip(self.vehicles, at, strict=True)}
 
     def step_size(self, vehicle: int) -> float:
         """``gamma_k`` that the next update of ``vehicle`` would use."""
@@ -626,6 +655,7 @@ class Fleet(Generic[P]):
                 refit=policy.refit is not None
                 and learning.fitted > 0
                 and len(learning.reservoir) >= policy.refit * learning.fitted,
+                stands=self.config.stands,
             )
         if len(done.positions) != len(self.vehicles) or len(done.updates) != len(self.vehicles):
             raise ReplayMismatch("a recorded consolidation does not match the fleet's vehicles")

@@ -10,11 +10,18 @@ needs none of it.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
+import numpy as np
+
+from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput
+from routing_svc.network.stands import Stand, stands_on_network
+from routing_svc.optimum.stands import solve_stands
 from routing_svc.sa import Annealing, Objective, learning_config, prior_counts
 from routing_svc.sa.schedules import Counting, schedule_from_dict
+from routing_svc.sa.stands import StandSet
 from routing_svc.service.networks import NetworkEntry
 from routing_svc.service.reference import (
     build_demand,
@@ -23,7 +30,7 @@ from routing_svc.service.reference import (
     optimum_start,
     reference_optimum,
 )
-from routing_svc.service.schemas import FleetSpec
+from routing_svc.service.schemas import FleetSpec, StandSpec
 from routing_svc.types import NetPosition
 
 
@@ -43,10 +50,19 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
         )
     if spec.start is not None and len(missing) != n:
         raise InvalidInput("with 'start', leave every vehicle's position out")
+    stands = None if spec.stands is None else build_stands(spec.stands, entry, vehicles=n)
     if spec.start is not None:
         sample = [entry.resolve(p) for p in spec.start.optimum.sample]
-        positions: list[NetPosition] = optimum_start(
-            entry, cost=spec.cost, sample=sample, vehicles=n, power=objective.power
+        positions: list[NetPosition] = (
+            optimum_start(entry, cost=spec.cost, sample=sample, vehicles=n, power=objective.power)
+            if stands is None
+            else solve_stands(
+                space,
+                DemandDistribution.from_masses("prior-sample", tuple(sample), np.ones(len(sample))),
+                n,
+                stands,
+                power=objective.power,
+            ).positions
         )
         # deterministic pairing: vehicles in id order take the sites in edge order
         positions.sort()
@@ -74,6 +90,8 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
         prior_counts=counts,
         learning_vehicles=spec.learning_vehicles,
     )
+    if stands is not None:
+        config = replace(config, stands=stands)
     reference = None
     if demand_spec is not None:
         demand = build_demand(entry, demand_spec)
@@ -90,7 +108,7 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
     return {
         "network": entry.id,
         "cost": spec.cost,
-        "config": config.to_dict(),
+        "config": config.to_dict(space.encode),
         "vehicles": [
             {"id": v.id, "type": v.type, "speed": v.speed, "position": space.encode(starts[v.id])}
             for v in spec.vehicles
@@ -98,3 +116,25 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
         "reference": reference,
         "service_thresholds": list(spec.service_thresholds),
     }
+
+
+def build_stands(
+    specs: list[StandSpec], entry: NetworkEntry, *, vehicles: int
+) -> StandSet[NetPosition]:
+    """The stands of a fleet spec: every one on the network, together holding the fleet.
+
+    Stands at one position add their capacities (:meth:`StandSet.merged`).
+    """
+    given = [Stand(f"#{i}", s.edge, s.offset, s.capacity) for i, s in enumerate(specs)]
+    reading = stands_on_network(given, entry.network)
+    if reading.dropped:
+        off = "; ".join(f"stand {d.id} on edge {d.edge!r}: {d.reason}" for d in reading.dropped[:5])
+        raise InvalidInput(
+            f"{len(reading.dropped)} stands are unusable on network {entry.id!r}: {off}"
+        )
+    positions = reading.positions(entry.network)
+    stands = StandSet.merged(
+        [(p, s.capacity) for p, s in zip(positions, reading.usable, strict=True)]
+    )
+    stands.check_fleet(vehicles)
+    return stands

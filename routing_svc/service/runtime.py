@@ -59,7 +59,9 @@ class FleetRuntime:
             for v in created["vehicles"]
         ]
         self.fleet: Fleet[NetPosition] = Fleet.create(
-            self.base_space, vehicles, FleetConfig.from_dict(created["config"])
+            self.base_space,
+            vehicles,
+            FleetConfig.from_dict(created["config"], self.base_space.decode),
         )
         self.version = 1
         self.deleted = False

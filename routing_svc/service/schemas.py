@@ -32,6 +32,12 @@ class EdgePosition(Strict):
     offset: Annotated[float, Field(allow_inf_nan=False, ge=0.0)] = 0.0
 
 
+class StandSpec(EdgePosition):
+    """A stand: a place on an edge where up to ``capacity`` vehicles may park."""
+
+    capacity: Annotated[int, Field(strict=True, ge=1, le=1_000_000)]
+
+
 class XYPosition(Strict):
     x: Finite
     y: Finite
@@ -191,6 +197,22 @@ class FleetSpec(Strict):
             "among the available vehicles moves, as in the hypercube model).",
         ),
     ] = "all"
+    stands: (
+        Annotated[
+            list[StandSpec],
+            Field(
+                min_length=1,
+                max_length=10_000,
+                description="The stands the vehicles may park at, each an edge, an offset and "
+                "a capacity (`routing-svc stands FILE.add.xml --net NET --json` lists those of a "
+                "SUMO additional file): a consolidation then solves over the stands only, "
+                "with their capacities, and every vehicle has the nearest stand with free "
+                "capacity to its reference. Every stand must be on the network, and the "
+                "capacities must hold the fleet. Default: vehicles park anywhere.",
+            ),
+        ]
+        | None
+    ) = None
     service_thresholds: Annotated[
         list[Annotated[float, Field(allow_inf_nan=False, gt=0.0, le=1e9)]],
         Field(
