@@ -164,7 +164,9 @@ def write_fleet(
         dispatches it; SUMO's own idle algorithm is used otherwise).
     stands : bool
         Whether idle taxis use the stands of :func:`write_taxi_stands` (SUMO's
-        ``taxistand`` idle algorithm), choosing the closest one.
+        ``taxistand`` idle algorithm), choosing the closest one; vehicle ``k``
+        starts parked at stand ``k`` (SUMO cannot send a taxi inserted on a
+        stand to that stand).
     """
     lines = [
         "<routes>",
@@ -177,15 +179,20 @@ def write_fleet(
             '        <param key="parking.ignoreDest" value="1"/>',
         ]
     lines.append("    </vType>")
-    for v in vehicles:
+    for number, v in enumerate(vehicles):
         pos = _stop_offset(v.offset, lengths[v.edge])
         edge = quoteattr(v.edge)
+        depart = _stand_span(v.offset, lengths[v.edge])[0] if stands else max(pos - 1.0, 0.0)
         lines.append(
             f'    <vehicle id={quoteattr(v.id)} type="{FLEET_TYPE}" depart="0" '
-            f'departPos="{max(pos - 1.0, 0.0):.2f}" line="taxi">'
+            f'departPos="{depart:.2f}" line="taxi">'
         )
         lines.append(f"        <route edges={edge}/>")
-        if park:
+        if stands:
+            lines.append(
+                f'        <stop parkingArea="{_stand_id(number)}" duration="{PARK_SECONDS:g}"/>'
+            )
+        elif park:
             lines.append(
                 f'        <stop edge={edge} endPos="{pos:.2f}" duration="{PARK_SECONDS:g}" '
                 'parking="true"/>'
@@ -224,6 +231,16 @@ def passenger_lanes(net: Path, edges: Sequence[str]) -> dict[str, int]:
     return found
 
 
+def _stand_id(number: int) -> str:
+    return f"stand{number:03d}"
+
+
+def _stand_span(offset: float, length: float) -> tuple[float, float]:
+    """Where a stand around ``offset`` begins and ends on a lane of ``length`` metres."""
+    start = min(max(offset - STAND_LENGTH / 2.0, 0.0), max(length - STAND_LENGTH, 0.0))
+    return start, min(start + STAND_LENGTH, length)
+
+
 def write_taxi_stands(
     path: Path,
     sites: Sequence[FleetVehicle],
@@ -243,10 +260,8 @@ def write_taxi_stands(
     lines = ["<additional>"]
     stand_ids = []
     for number, site in enumerate(sites):
-        length = lengths[site.edge]
-        start = min(max(site.offset - STAND_LENGTH / 2.0, 0.0), max(length - STAND_LENGTH, 0.0))
-        end = min(start + STAND_LENGTH, length)
-        stand = f"stand{number:03d}"
+        start, end = _stand_span(site.offset, lengths[site.edge])
+        stand = _stand_id(number)
         stand_ids.append(stand)
         lane = quoteattr(f"{site.edge}_{lanes.get(site.edge, 0)}")
         lines.append(
