@@ -200,16 +200,19 @@ def _check_text(check: dict[str, Any]) -> str:
 
 def _table(figures: dict[str, dict[str, Any]]) -> list[str]:
     thresholds = next(iter(figures.values()))["within"].keys() if figures else []
+    several = any(row["seeds"] > 1 for row in figures.values())
     head = " | ".join(f"≤ {t} s" for t in thresholds)
     lines = [
-        f"| policy | mean wait (s) | p90 wait (s) | {head} | empty km | requests/vehicle-h "
+        f"| policy | mean wait (s){' ± sd over seeds' if several else ''} | p90 wait (s) "
+        f"| {head} | empty km | requests/vehicle-h "
         "| busy | served | queued |",
         "|---|---|---|" + "---|" * len(thresholds) + "---|---|---|---|---|",
     ]
     for name, row in figures.items():
         within = " | ".join(_num(100.0 * row["within"][t], ".0f") + "%" for t in thresholds)
+        spread = f" ± {_num(row['mean_wait_sd_s'])}" if row["seeds"] > 1 else ""
         lines.append(
-            f"| {name} | {_num(row['mean_wait_s'])} ± {_num(row['mean_wait_sd_s'])} "
+            f"| {name} | {_num(row['mean_wait_s'])}{spread} "
             f"| {_num(row['p90_wait_s'])} | {within} | {_num(row['empty_km'], '.1f')} "
             f"| {_num(row['requests_per_vehicle_hour'], '.2f')} "
             f"| {_num(100.0 * row['busy_fraction'])}% | {row['served']}/{row['requests']} "
