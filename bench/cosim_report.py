@@ -66,9 +66,16 @@ class Experiment:
 
 
 def experiments(
-    *, seeds: Sequence[int], hours: float, rate: float, history: int, workers: int
+    *,
+    seeds: Sequence[int],
+    hours: float,
+    rate: float,
+    history: int,
+    workers: int,
+    rule: str | None = None,
 ) -> list[Experiment]:
-    """Every experiment of the full report, in order."""
+    """Every experiment of the full report, in order (``rule``: the fleets' learning rule,
+    ``None`` for the service's default)."""
     base = CosimSpec(
         network="drt",
         duration=hours * 3600.0,
@@ -77,6 +84,7 @@ def experiments(
         seeds=tuple(seeds),
         workers=workers,
         policies=parse_policies(POLICIES),
+        rule=rule,
     )
     networks = {"drt": ("drt", 20.0)}
     if BADHERSFELD.is_file():
@@ -333,10 +341,14 @@ command; the full report is `python bench/cosim_report.py` (3 seeds). Figures:
     `POST .../assign` again (read-only). After a drop-off a vehicle drives back to its
     reference and parks; an idle vehicle whose reference moves drives to the new one.
     Whose reference learns is the paper's choice, `learning_vehicles=all` (the closest
-    reference moves, busy or not), with the service's default learning rule; the fleet
-    starts at the p-median of {history} historical requests.
+    reference moves, busy or not), with the {rule} learning rule; the fleet starts at the
+    p-median of {history} historical requests.
   - `sa-available`: the same with `learning_vehicles=available` (the closest reference
-    among the available vehicles moves).
+    among the available vehicles moves). Under the `consolidating` rule the references
+    move mostly at consolidations (the p-median of a reservoir of recent targets), which
+    do not depend on who is available, and its held steps move rarely: where the two rows
+    are equal, the choice of learning vehicles changed no reference in that run
+    (`--rule paper` compares the two choices under the paper's step alone).
   - `optimum`: the same dispatch, references frozen at the best-known p-median of the
     demand (for incidents: the hindsight p-median of the realised incidents).
   - `sumo-stop`: SUMO's taxi device alone, `greedy` dispatch every second, idle taxis stop
@@ -378,6 +390,7 @@ def render(
     command: str,
     seeds: Sequence[int],
     history: int,
+    rule: str | None,
     left_out: list[str],
 ) -> str:
     """The whole document."""
@@ -406,6 +419,7 @@ def render(
         runtime=runtime,
         seeds=", ".join(map(str, seeds)),
         history=history,
+        rule=f"`{rule}`" if rule else "service's default (`consolidating`)",
         thresholds=", ".join(f"{t:g}" for t in DEFAULT_THRESHOLDS),
         missing=missing,
     )
@@ -442,6 +456,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--hours", type=float, default=2.0)
     parser.add_argument("--rate", type=float, default=40.0, help="requests per hour")
     parser.add_argument("--history", type=int, default=1000)
+    parser.add_argument(
+        "--rule",
+        choices=["consolidating", "probe", "paper"],
+        default=None,
+        help="learning rule of the service's fleets (default: the service's)",
+    )
     parser.add_argument("--only", default=None, help="comma list of experiment keys")
     parser.add_argument("--no-resume", action="store_true")
     parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
@@ -453,6 +473,7 @@ def main(argv: list[str] | None = None) -> int:
         rate=args.rate,
         history=args.history,
         workers=args.workers,
+        rule=args.rule,
     )
     left_out: list[str] = []
     if args.only:
@@ -502,6 +523,8 @@ def main(argv: list[str] | None = None) -> int:
             command += f" {option} {value:g}"
     if args.history != 1000:
         command += f" --history {args.history}"
+    if args.rule is not None:
+        command += f" --rule {args.rule}"
     if args.only:
         command += f" --only {args.only}"
     text = render(
@@ -510,6 +533,7 @@ def main(argv: list[str] | None = None) -> int:
         command=command,
         seeds=args.seeds,
         history=args.history,
+        rule=args.rule,
         left_out=left_out,
     )
     (ROOT / "docs" / "cosim.md").write_text(text, encoding="utf-8")
