@@ -74,12 +74,14 @@ class Waiting:
     """A request that waits for vehicles (FIFO).
 
     ``requires`` is what is still missing (``None``: any one vehicle);
-    ``carrier`` the vehicle already sent that carries the customer, if any.
+    ``carrier`` the vehicle already sent that carries the customer, if any;
+    ``orphaned`` whether a carrier left the simulation before the drop-off.
     """
 
     reservation: Reservation
     requires: tuple[str, ...] | None = None
     carrier: str | None = None
+    orphaned: bool = False
 
 
 @dataclass(slots=True)
@@ -97,6 +99,10 @@ class DispatchLog:
     """Times SUMO could not send a vehicle home at once (it was tried again a step later)."""
     lost: list[str] = field(default_factory=list)
     """Fleet vehicles that left the simulation (never expected; counted, not fatal)."""
+    orphaned: list[str] = field(default_factory=list)
+    """Persons whose carrier left the simulation; asked for again at the head of the queue."""
+    dropped: list[str] = field(default_factory=list)
+    """Orphaned persons SUMO would not let another vehicle serve."""
     traffic_updates: int = 0
     state_batches: int = 0
     """Batches of vehicle states sent to the service."""
@@ -177,6 +183,8 @@ class FleetDispatcher:
         self.busy: set[str] = set()
         self.escorts: dict[str, str] = {}
         """Vehicle -> the carrier it accompanies (partial answers): released together."""
+        self.carrying: dict[str, Waiting] = {}
+        """Carrier -> the request it serves, until its drop-off."""
         self.gone: set[str] = set()
         self.homeless: set[str] = set()
         self.reported: dict[str, Position] = {}
@@ -317,8 +325,12 @@ class FleetDispatcher:
         for vehicle in sent:
             if waiting.carrier is None:
                 if not self._dispatch(vehicle, waiting.reservation):
+                    if waiting.orphaned:  # SUMO no longer offers it (e.g. picked up)
+                        self.log.dropped.append(person)
+                        return True
                     return False
                 waiting.carrier = vehicle
+                self.carrying[vehicle] = waiting
                 self.log.named[person] = vehicle
                 self.log.predicted[person] = float(dispatch["vehicles"][0]["cost"])
             else:
@@ -384,15 +396,25 @@ class FleetDispatcher:
         carriers = sorted(v for v in self.busy if v not in self.escorts)
         states = {v: self.backend.taxi_state(v) for v in carriers}
         done = []
+        lost = []
         for vehicle, state in states.items():
             if state == TAXI_GONE:
                 self._lose(vehicle)
+                lost.append(vehicle)
             elif state == TAXI_IDLE:
                 done.append(vehicle)
-        done += sorted(e for e, carrier in self.escorts.items() if carrier in done)
+        for vehicle in lost:
+            orphan = self.carrying.pop(vehicle, None)
+            if orphan is not None:
+                orphan.carrier, orphan.orphaned = None, True
+                self.queue.appendleft(orphan)
+                self.log.orphaned.append(orphan.reservation.person)
+                self._retry = True
+        done += sorted(e for e, carrier in self.escorts.items() if carrier in done + lost)
         for vehicle in done:
             self.busy.discard(vehicle)
             self.escorts.pop(vehicle, None)
+            self.carrying.pop(vehicle, None)
             self._stage(vehicle, "available", position=self.place(vehicle))
             self.homeless.add(vehicle)
         return bool(done)

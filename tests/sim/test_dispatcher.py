@@ -125,7 +125,9 @@ def test_a_vehicle_that_leaves_the_simulation_is_reported_offline(
         if second == 10:
             backend.vanish("v0")  # while busy with r1
         dispatcher.on_step()
-    assert [(d.vehicle, d.reservation) for d in backend.dispatches] == [("v0", "r1"), ("v1", "r2")]
-    assert dispatcher.log.lost == ["v0"]
+    sent = [(d.time, d.vehicle, d.reservation) for d in backend.dispatches]
+    # r1's carrier left before the drop-off: r1 is asked for again and v1 serves it
+    assert sent == [(1, "v0", "r1"), (10, "v1", "r1"), (50, "v1", "r2")]
+    assert dispatcher.log.lost == ["v0"] and dispatcher.log.orphaned == ["p1"]
     assert _statuses(client) == {"v0": "offline", "v1": "available"}
-    assert [v for _, v, _, _ in backend.parked] == ["v1"]
+    assert [v for _, v, _, _ in backend.parked] == ["v1", "v1"]
