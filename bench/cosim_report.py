@@ -375,6 +375,7 @@ summaries: `docs/figures/cosim/report.json`.
 ```
 python bench/cosim_report.py                                  # everything, 3 seeds
 python bench/cosim_report.py --seeds 0 --only drt-persons-10  # a part
+python bench/cosim_report.py --seeds 0 --hours 1 --render-only  # this document from the runs
 routing-svc cosim --net drt --vehicles 10 --hours 2 --seeds 0,1,2 --history 1000 \\
     --policies sa,sa-available,optimum,sumo-stop,sumo-taxistand
 ```
