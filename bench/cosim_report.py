@@ -283,6 +283,13 @@ def section(experiment: Experiment, figures: dict[str, dict[str, Any]], pictures
             + "."
         )
     lines += _why(figures, goal_checks(figures))
+    if spec.mode == "incidents" and not goal_checks(figures)[2]["met"]:
+        requests = figures.get("sa", {}).get("requests", 0)
+        lines.append(
+            f"- For incidents `optimum` is the hindsight p-median of the very {requests} "
+            f"incidents of the run for {spec.vehicles} vehicles, a bound no deployment reaches; "
+            "`sa` learnt from incidents recorded in another traffic realisation."
+        )
     lines.append("")
     for kind, path in pictures.items():
         rel = path.relative_to(ROOT / "docs")
