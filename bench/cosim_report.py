@@ -3,14 +3,21 @@
 Runs every experiment of the report in SUMO (libsumo, ``--workers`` parallel
 processes), then writes ``docs/cosim.md``, its figures under
 ``docs/figures/cosim/`` and ``docs/figures/cosim/report.json`` (every
-summary). SUMO's inputs and outputs go to ``--workdir``; with ``--resume``
-(the default) runs already saved there for the same options are reused, so
-an interrupted report continues where it stopped.
+summary). SUMO's inputs and outputs go to ``--workdir``; runs already saved
+there for the same options are reused (``--no-resume`` runs everything
+again), so an interrupted report continues where it stopped.
 
-Networks: SUMO's DRT district (``<SUMO_HOME>/tools/game/DRT/osm.net.xml``)
+Experiments: SUMO's DRT district (``<SUMO_HOME>/tools/game/DRT/osm.net.xml``)
 and Bad Hersfeld (``../shared/nets/badhersfeld.net.xml.gz`` beside the
-checkout; skipped with a note if absent). 2 simulated hours of requests,
-10 and 20 vehicles, 3 seeds.
+checkout; skipped with a note if absent), 10 and 20 vehicles, persons and
+incidents; Bad Hersfeld saturated (10 vehicles, 1.5 times the request rate)
+and with demand from its buildings (``badhersfeld.buildings.csv``). Each
+experiment compares ``sa``, ``sa-available``, ``optimum``, ``sumo-stop`` and
+``sumo-taxistand`` on identical demand and checks the goals of the live
+operations issue: ``sa``'s mean wait at most 0.8 times ``sumo-stop``'s, its
+90th-percentile wait at most 0.8 times ``sumo-stop``'s, and its mean wait at
+most 1.05 times ``optimum``'s. 3 seeds by default (``--seeds 0,1,2``);
+``--only`` picks experiments.
 """
 
 from __future__ import annotations
@@ -20,739 +27,444 @@ import json
 import math
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from routing_svc.optimum import MAX_SITES
-from routing_svc.sim import CosimResult, CosimSpec, parse_policies, run_cosim
+from routing_svc.sim import CosimResult, CosimSpec, PolicyRun, parse_policies, run_cosim
+from routing_svc.sim.measures import DEFAULT_THRESHOLDS
 from routing_svc.sim.plots import write_figures
 
 ROOT = Path(__file__).resolve().parent.parent
-BADHERSFELD = ROOT.parent / "shared" / "nets" / "badhersfeld.net.xml.gz"
+SHARED = ROOT.parent / "shared" / "nets"
+BADHERSFELD = SHARED / "badhersfeld.net.xml.gz"
+BUILDINGS = SHARED / "badhersfeld.buildings.csv"
 FIGURES = ROOT / "docs" / "figures" / "cosim"
-MAIN = "sa,sa-cold,static,optimum,sumo-stop,sumo-circling"
+POLICIES = "sa,sa-available,optimum,sumo-stop,sumo-taxistand"
+
+#: The goals: (name, statistic, baseline policy, largest ratio of the policy's to the baseline's).
+GOALS = (
+    ("mean ≤ 0.8 x sumo-stop", "mean_wait_s", "sumo-stop", 0.8),
+    ("p90 ≤ 0.8 x sumo-stop", "p90_wait_s", "sumo-stop", 0.8),
+    ("mean ≤ 1.05 x optimum", "mean_wait_s", "optimum", 1.05),
+)
+
+#: Request rate of the saturated experiment, as a multiple of the base rate.
+SATURATED_FACTOR = 1.5
 
 
 @dataclass(frozen=True)
 class Experiment:
-    """One experiment of the report and where its results go."""
+    """One experiment of the report."""
 
     key: str
     title: str
     spec: CosimSpec
 
 
-def _experiments(args: argparse.Namespace) -> list[Experiment]:
-    seeds = tuple(range(args.seeds))
+def experiments(
+    *,
+    seeds: Sequence[int],
+    hours: float,
+    rate: float,
+    history: int,
+    workers: int,
+    rule: str | None = None,
+) -> list[Experiment]:
+    """Every experiment of the full report, in order (``rule``: the fleets' learning rule,
+    ``None`` for the service's default)."""
+    base = CosimSpec(
+        network="drt",
+        duration=hours * 3600.0,
+        rate=rate,
+        history=history,
+        seeds=tuple(seeds),
+        workers=workers,
+        policies=parse_policies(POLICIES),
+        rule=rule,
+    )
     networks = {"drt": ("drt", 20.0)}
     if BADHERSFELD.is_file():
         networks["badhersfeld"] = (str(BADHERSFELD), 3.0)
-    base = CosimSpec(
-        network="drt",
-        duration=args.hours * 3600.0,
-        rate=args.rate,
-        history=args.history,
-        seeds=seeds,
-        workers=args.workers,
-    )
-    drt = replace(base, density=20.0, vehicles=10)
-    extras = [
-        Experiment(
-            "drt-live-10",
-            "drt, persons, 10 vehicles, live travel times every 60 s",
-            replace(drt, policies=parse_policies("sa,optimum"), traffic_period=60.0),
-        ),
-        Experiment(
-            "drt-tracking-10",
-            "drt, persons, 10 vehicles, hotspots move halfway",
-            replace(drt, policies=parse_policies("sa,sa-floor"), shift_at=base.duration / 2.0),
-        ),
-    ]
     out = []
     for name, (net, density) in networks.items():
-        for vehicles in (10, 20):
-            spec = replace(
-                base,
-                network=net,
-                density=density,
-                vehicles=vehicles,
-                policies=parse_policies(MAIN),
+        for mode in ("persons", "incidents"):
+            for vehicles in (10, 20):
+                spec = replace(base, network=net, density=density, vehicles=vehicles, mode=mode)
+                out.append(
+                    Experiment(
+                        f"{name}-{mode}-{vehicles}", f"{name}, {mode}, {vehicles} vehicles", spec
+                    )
+                )
+        if name == "badhersfeld":
+            busy = replace(
+                base, network=net, density=density, vehicles=10, rate=rate * SATURATED_FACTOR
             )
-            title = f"{name}, persons, {vehicles} vehicles"
-            out.append(Experiment(f"{name}-persons-{vehicles}", title, spec))
-        spec = replace(
-            base,
-            network=net,
-            density=density,
-            vehicles=10,
-            mode="incidents",
-            policies=parse_policies("sa,static,optimum,sumo-stop,sumo-circling"),
-        )
-        out.append(Experiment(f"{name}-incidents-10", f"{name}, incidents, 10 vehicles", spec))
-        if name == "drt":
-            out += extras
-        else:
-            lighter = replace(
-                base,
-                network=net,
-                density=density,
-                vehicles=10,
-                rate=args.rate / 2.0,
-                policies=parse_policies(MAIN),
+            out.append(
+                Experiment(
+                    f"{name}-saturated-10",
+                    f"{name}, persons, 10 vehicles, saturated ({busy.rate:g} requests/h)",
+                    busy,
+                )
             )
-            title = f"{name}, persons, 10 vehicles, half the request rate"
-            out.append(Experiment(f"{name}-persons-10-light", title, lighter))
+            if BUILDINGS.is_file():
+                homes = replace(
+                    base, network=net, density=density, vehicles=10, demand=f"buildings:{BUILDINGS}"
+                )
+                out.append(
+                    Experiment(
+                        f"{name}-buildings-10",
+                        f"{name}, persons from the buildings, 10 vehicles",
+                        homes,
+                    )
+                )
     return out
 
 
-def _stats(values: list[float]) -> tuple[float, float]:
-    array = np.array([v for v in values if math.isfinite(v)], dtype=float)
-    if array.size == 0:
-        return math.nan, math.nan
-    return float(array.mean()), float(array.std(ddof=1)) if array.size > 1 else 0.0
+# -- figures per policy --------------------------------------------------------
 
 
-def _left_network(tripinfo: str) -> int:
-    """Fleet vehicles that reached the end of a route and left SUMO before the end."""
-    from defusedxml import ElementTree
-
-    root = ElementTree.parse(tripinfo).getroot()
-    return sum(
-        1
-        for trip in root.iter("tripinfo")
-        if str(trip.get("id", "")).startswith("fleet") and float(trip.get("arrival", "-1")) >= 0
-    )
+def _mean(values: Sequence[float]) -> float:
+    finite = [v for v in values if not math.isnan(v)]
+    return float(np.mean(finite)) if finite else math.nan
 
 
-def _policy_rows(result: CosimResult) -> dict[str, dict[str, Any]]:
-    rows = {}
-    for name, runs in result.by_policy().items():
-        waits = [r.mean_wait for r in runs]
-        late = [r.mean_wait_second_half for r in runs]
-        curves = [
-            result.curves[(name, r.seed)][-1][1] for r in runs if (name, r.seed) in result.curves
-        ]
-        rows[name] = {
-            "wait": _stats(waits),
-            "late": _stats(late),
-            "served": sum(r.served for r in runs),
-            "requests": sum(r.requests for r in runs),
-            "empty_km": _stats([r.empty_km for r in runs])[0],
-            "fallbacks": sum(r.fallbacks for r in runs),
-            "left": sum(_left_network(r.tripinfo) for r in runs),
-            "speed": _stats([r.sim_speed for r in runs])[0],
-            "expected": _stats(curves)[0] if curves else math.nan,
-        }
-    return rows
+def _sd(values: Sequence[float]) -> float:
+    finite = [v for v in values if math.isfinite(v)]
+    return float(np.std(finite, ddof=1)) if len(finite) > 1 else 0.0
 
 
-def _fmt(pair: tuple[float, float]) -> str:
-    mean, sd = pair
-    return "n/a" if not math.isfinite(mean) else f"{mean:.1f} ± {sd:.1f}"
-
-
-def _table(result: CosimResult) -> list[str]:
-    rows = _policy_rows(result)
-    optimum = [o.expected_cost for o in result.optimum.values() if o is not None]
-    lines = [
-        "| policy | mean wait (s) | second-half wait (s) | served | empty km | fallbacks "
-        "| vehicles lost | expected free-flow wait at end (s) | sim speed (x) |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for name, row in rows.items():
-        expected = row["expected"]
-        if name == "optimum" and optimum:
-            expected = float(np.mean(optimum))
-        lines.append(
-            f"| {name} | {_fmt(row['wait'])} | {_fmt(row['late'])} | "
-            f"{row['served']}/{row['requests']} | {row['empty_km']:.1f} | {row['fallbacks']} | "
-            f"{row['left']} | "
-            f"{'' if not math.isfinite(expected) else f'{expected:.1f}'} | {row['speed']:.0f} |"
-        )
-    return lines
-
-
-def _verdicts(result: CosimResult) -> list[str]:
-    rows = _policy_rows(result)
-    out = []
-    sa = rows.get("sa", {}).get("wait", (math.nan, 0.0))[0]
-    if "optimum" in rows:
-        opt = rows["optimum"]["wait"][0]
-        ratio = sa / opt - 1.0
-        verdict = "met" if ratio <= 0.10 else "NOT met"
-        out.append(
-            f"- `sa` vs `optimum`: {ratio:+.1%} mean wait (target within 10%: **{verdict}**)."
-        )
-    if "sumo-stop" in rows:
-        stop = rows["sumo-stop"]["wait"][0]
-        cut = 1.0 - sa / stop
-        verdict = "met" if cut >= 0.20 else "NOT met"
-        out.append(
-            f"- `sa` vs `sumo-stop`: {cut:.1%} lower mean wait "
-            f"(target at least 20%: **{verdict}**)."
-        )
-    if "sumo-circling" in rows:
-        circ = rows["sumo-circling"]["wait"][0]
-        out.append(f"- `sa` vs `sumo-circling`: {1.0 - sa / circ:.1%} lower mean wait.")
-    return out
-
-
-def _served_pairs(runs: list[Any]) -> list[tuple[Any, float]]:
-    """Per served request of ``runs``: the service's prediction and SUMO's wait."""
-    return [
-        (p, w)
-        for run in runs
-        if run.predicted
-        for p, (_, w, ok) in zip(run.predicted, run.waits, strict=True)
-        if ok and math.isfinite(p[0])
-    ]
-
-
-def _decomposition(result: CosimResult) -> list[str]:
-    """Where the measured wait comes from, for the policies the service dispatches."""
-    lines = [
-        "| policy | fallbacks | free-flow T from the chosen reference (s) "
-        "| SUMO wait, chosen vehicle went (s) | SUMO wait, fallback (s) |",
-        "|---|---|---|---|---|",
-    ]
-    for name, runs in result.by_policy().items():
-        pairs = _served_pairs(runs)
-        if not pairs:
-            continue
-        direct = [(p[0], w) for p, w in pairs if not p[1]]
-        other = [w for p, w in pairs if p[1]]
-        lines.append(
-            f"| {name} | {len(other) / len(pairs):.0%} | "
-            f"{np.mean([t for t, _ in direct]) if direct else math.nan:.1f} | "
-            f"{np.mean([w for _, w in direct]) if direct else math.nan:.1f} | "
-            f"{np.mean(other) if other else math.nan:.1f} |"
-        )
-    return lines
-
-
-def _fixed_point(result: CosimResult, *, targets: int = 2000) -> list[str]:
-    """Feed the SA (no SUMO) targets of the true demand, starting at the p-median."""
-    from routing_svc.sa import (
-        ROUTING,
-        Constant,
-        Fleet,
-        FleetConfig,
-        Vehicle,
-        default_probe,
-        default_schedule,
-    )
-    from routing_svc.sim.scenario import expected_wait
-
-    prepared = result.prepared
-    if prepared is None or prepared.phases is None:
-        return []
-    best = next(o for o in result.optimum.values() if o is not None)
-    demand = prepared.phases[0].demand
-    space = prepared.space
-    network = prepared.network
-    at_ends = sum(1 for p in best.positions if p.offset >= float(network.length[p.edge]) - 1e-9)
-    n = len(best.positions)
-    default = default_schedule(typical_cost=space.typical_cost(), n_vehicles=n, power=1.0)
-    window = default_probe(typical_cost=space.typical_cost(), n_vehicles=n)
-    schedules = {
-        "paper's rule, the service's default step": (default, None),
-        "paper's rule, a constant step of 0.1 s (about 1 m)": (Constant(0.1), None),
-        "with the probe (the service's default)": (default, window),
-        "with the probe, a constant step of 0.1 s": (Constant(0.1), window),
+def policy_figures(runs: Sequence[PolicyRun]) -> dict[str, Any]:
+    """Means over the seeds of one policy's runs (the statistics the report shows)."""
+    summaries = [r.summary() for r in runs]
+    thresholds = [f"{t:g}" for t in runs[0].thresholds] if runs else []
+    return {
+        "seeds": len(runs),
+        "mean_wait_s": _mean([s["mean_wait_s"] for s in summaries]),
+        "mean_wait_sd_s": _sd([s["mean_wait_s"] for s in summaries]),
+        "p90_wait_s": _mean([s["p90_wait_s"] for s in summaries]),
+        "within": {t: _mean([s["within"][t] for s in summaries]) for t in thresholds},
+        "empty_km": _mean([s["empty_km"] for s in summaries]),
+        "requests_per_vehicle_hour": _mean([s["requests_per_vehicle_hour"] for s in summaries]),
+        "busy_fraction": _mean([s["busy_fraction"] for s in summaries]),
+        "requests": sum(s["requests"] for s in summaries),
+        "served": sum(s["served"] for s in summaries),
+        "queued": sum(s["queued"] for s in summaries),
+        "fallbacks": sum(s["fallbacks"] for s in summaries),
+        "lost": sum(s["lost"] for s in summaries),
+        "wall_seconds": sum(s["wall_seconds"] for s in summaries),
+        "sim_seconds": sum(s["sim_seconds"] for s in summaries),
     }
-    marks = [0, 10, 100, 500, targets]
+
+
+def goal_checks(figures: dict[str, dict[str, Any]], policy: str = "sa") -> list[dict[str, Any]]:
+    """Each goal of :data:`GOALS` for ``policy``: ratio, whether met, and the shortfall.
+
+    ``shortfall_s`` is how many seconds ``policy``'s statistic is above what the
+    goal allows (0 when met); ``None`` when a policy is missing.
+    """
+    checks = []
+    for name, statistic, baseline, limit in GOALS:
+        mine = figures.get(policy, {}).get(statistic, math.nan)
+        theirs = figures.get(baseline, {}).get(statistic, math.nan)
+        ratio = mine / theirs if theirs and math.isfinite(theirs) else math.nan
+        allowed = limit * theirs
+        met = bool(math.isfinite(ratio) and ratio <= limit)
+        checks.append(
+            {
+                "goal": name,
+                "policy": policy,
+                "ratio": ratio,
+                "limit": limit,
+                "met": met,
+                "shortfall_s": None if not math.isfinite(ratio) else max(mine - allowed, 0.0),
+            }
+        )
+    return checks
+
+
+# -- markdown --------------------------------------------------------------------
+
+
+def _num(value: float, fmt: str = ".0f") -> str:
+    if math.isnan(value):
+        return "n/a"
+    if math.isinf(value):
+        return "∞"
+    return format(value, fmt)
+
+
+def _check_text(check: dict[str, Any]) -> str:
+    ratio = check["ratio"]
+    if not math.isfinite(ratio):
+        return "n/a"
+    if check["met"]:
+        return f"{ratio:.2f} met"
+    return f"{ratio:.2f} **missed** by {check['shortfall_s']:.0f} s"
+
+
+def _table(figures: dict[str, dict[str, Any]]) -> list[str]:
+    thresholds = next(iter(figures.values()))["within"].keys() if figures else []
+    several = any(row["seeds"] > 1 for row in figures.values())
+    head = " | ".join(f"≤ {t} s" for t in thresholds)
     lines = [
-        f"{at_ends} of the {n} optimum sites are at the end of an edge (step counters start at 0).",
-        "",
-        "| SA step | " + " | ".join(f"{k} targets" for k in marks) + " |",
-        "|---|" + "---|" * len(marks),
+        f"| policy | mean wait (s){' ± sd over seeds' if several else ''} | p90 wait (s) "
+        f"| {head} | empty km | requests/vehicle-h "
+        "| busy | served | queued |",
+        "|---|---|---|" + "---|" * len(thresholds) + "---|---|---|---|---|",
     ]
-    for label, (schedule, probe) in schedules.items():
-        values: dict[int, list[float]] = {k: [] for k in marks}
-        for seed in (0, 1, 2):
-            fleet = Fleet.create(
-                space,
-                [(Vehicle(f"v{i:03d}"), p) for i, p in enumerate(best.positions)],
-                FleetConfig(ROUTING, schedule, seed=seed, probe=probe),
-            )
-            values[0].append(expected_wait(space, fleet.state.positions, demand))
-            stream = demand.sample(np.random.default_rng([seed, 9]), targets)
-            for k, z in enumerate(stream, 1):
-                fleet.observe(z)
-                if k in values:
-                    values[k].append(expected_wait(space, fleet.state.positions, demand))
-        cells = " | ".join(f"{np.mean(values[k]):.1f}" for k in marks)
-        lines.append(f"| {label} | {cells} |")
-    return lines
-
-
-def _tracking(result: CosimResult) -> list[str]:
-    spec = result.spec
-    assert spec.shift_at is not None
-    shift = spec.warmup + spec.shift_at
-    lines = [
-        "| policy | expected wait before the move (s) | just after (s) | at the end (s) "
-        "| optimum before / after (s) | SUMO wait before / after the move (s) |",
-        "|---|---|---|---|---|---|",
-    ]
-    optimum = next(iter(result.optimum_curve.values()), [])
-    before_opt = [v for t, v in optimum if t < shift]
-    after_opt = [v for t, v in optimum if t >= shift]
-    for name in ("sa", "sa-floor"):
-        curves = [c for (p, _), c in result.curves.items() if p == name]
-        if not curves:
-            continue
-
-        def at(time: float, curves: list[list[tuple[float, float]]] = curves) -> float:
-            """Mean over seeds of the last recorded value at or before ``time``."""
-            return float(np.mean([[v for t, v in c if t <= time][-1] for c in curves]))
-
-        def after(time: float, curves: list[list[tuple[float, float]]] = curves) -> float:
-            """Mean over seeds of the first recorded value at or after ``time``."""
-            return float(np.mean([next(v for t, v in c if t >= time) for c in curves]))
-
-        runs = result.by_policy()[name]
-        first = [float(np.mean([w for t, w, ok in r.waits if ok and t < shift])) for r in runs]
-        second = [r.mean_wait_second_half for r in runs]
+    for name, row in figures.items():
+        within = " | ".join(_num(100.0 * row["within"][t], ".0f") + "%" for t in thresholds)
+        spread = f" ± {_num(row['mean_wait_sd_s'])}" if row["seeds"] > 1 else ""
+        lost = f" ({row['lost']} vehicle(s) left SUMO)" if row["lost"] else ""
         lines.append(
-            f"| {name} | {at(shift - 1):.1f} | {after(shift):.1f} | {at(spec.end):.1f} | "
-            f"{before_opt[-1] if before_opt else math.nan:.1f} / "
-            f"{after_opt[-1] if after_opt else math.nan:.1f} | "
-            f"{np.mean(first):.1f} / {np.mean(second):.1f} |"
+            f"| {name} | {_num(row['mean_wait_s'])}{spread} "
+            f"| {_num(row['p90_wait_s'])} | {within} | {_num(row['empty_km'], '.1f')} "
+            f"| {_num(row['requests_per_vehicle_hour'], '.2f')} "
+            f"| {_num(100.0 * row['busy_fraction'])}% | {row['served']}/{row['requests']}{lost} "
+            f"| {row['queued']} |"
         )
     return lines
 
 
-def _section(experiment: Experiment, result: CosimResult, figures: dict[str, Path]) -> list[str]:
+def _why(figures: dict[str, dict[str, Any]], checks: list[dict[str, Any]]) -> list[str]:
+    """Figures that explain a missed goal: load, queueing and the other policies."""
+    if all(c["met"] for c in checks):
+        return []
+    sa = figures.get("sa", {})
+    stop = figures.get("sumo-stop", {})
+    stand = figures.get("sumo-taxistand", {})
+    optimum = figures.get("optimum", {})
+    notes = [
+        f"- Load: {_num(sa.get('requests_per_vehicle_hour', math.nan), '.2f')} requests per "
+        f"vehicle-hour; `sa`'s vehicles were busy {_num(100 * sa.get('busy_fraction', math.nan))}% "
+        f"of the time and {sa.get('queued', 0)} of its {sa.get('requests', 0)} requests found "
+        "nobody available and waited in the queue.",
+        f"- `optimum` (same dispatch, references at the p-median): mean "
+        f"{_num(optimum.get('mean_wait_s', math.nan))} s, p90 "
+        f"{_num(optimum.get('p90_wait_s', math.nan))} s; `sumo-taxistand` (SUMO's dispatch, "
+        f"stands at the same sites): mean {_num(stand.get('mean_wait_s', math.nan))} s; "
+        f"`sumo-stop`: mean {_num(stop.get('mean_wait_s', math.nan))} s, p90 "
+        f"{_num(stop.get('p90_wait_s', math.nan))} s."
+        + (
+            " Even `optimum`'s references miss a `sumo-stop` goal here: with this dispatch "
+            "the gap is not where the references are."
+            if not all(c["met"] for c in goal_checks(figures, "optimum")[:2])
+            else ""
+        ),
+        f"- Empty km: `sa` {_num(sa.get('empty_km', math.nan), '.1f')}, `sumo-stop` "
+        f"{_num(stop.get('empty_km', math.nan), '.1f')} (the service's vehicles drive back to "
+        "their references after each ride).",
+    ]
+    return notes
+
+
+def section(experiment: Experiment, figures: dict[str, dict[str, Any]], pictures: Any) -> list[str]:
+    """One experiment's part of the document."""
     spec = experiment.spec
     lines = [f"### {experiment.title}", ""]
     lines.append(
-        f"{len(spec.seeds)} seeds, {spec.duration / 3600:g} h of requests at {spec.rate:g}/h "
-        f"after {spec.warmup / 60:g} min of traffic, {spec.drain / 60:g} min to finish; "
-        f"background traffic {spec.density:g} vehicles/h/km (randomTrips)"
-        + (f"; live travel times every {spec.traffic_period:g} s" if spec.traffic_period else "")
-        + "."
+        f"Seeds {', '.join(map(str, spec.seeds))}; {spec.duration / 3600:g} h of requests at "
+        f"{spec.rate:g}/h ({spec.demand if spec.mode == 'persons' else 'incidents'}) after "
+        f"{spec.warmup / 60:g} min of traffic, {spec.drain / 60:g} min to finish; background "
+        f"traffic {spec.density:g} vehicles/h/km."
     )
+    lines += ["", *_table(figures), ""]
+    for policy in ("sa", "sa-available"):
+        if policy not in figures:
+            continue
+        checks = goal_checks(figures, policy)
+        lines.append(
+            f"- Goals for `{policy}`: "
+            + "; ".join(f"{c['goal']}: {_check_text(c)}" for c in checks)
+            + "."
+        )
+    lines += _why(figures, goal_checks(figures))
+    if spec.mode == "incidents" and not goal_checks(figures)[2]["met"]:
+        requests = figures.get("sa", {}).get("requests", 0)
+        lines.append(
+            f"- For incidents `optimum` is the hindsight p-median of the very {requests} "
+            f"incidents of the run for {spec.vehicles} vehicles, a bound no deployment reaches; "
+            "`sa` learnt from incidents recorded in another traffic realisation."
+        )
     lines.append("")
-    lines += _tracking(result) if spec.shift_at is not None else _table(result)
-    lines.append("")
-    if spec.shift_at is None:
-        lines += _verdicts(result)
-        lines += ["", "Where the wait comes from (all seeds):", ""]
-        lines += _decomposition(result)
-        lines.append("")
-    if spec.mode == "persons" and spec.shift_at is None and spec.traffic_period is None:
-        check = _fixed_point(result)
-        if check:
-            lines += [
-                "Is the p-median a fixed point of the SA? The SA alone (no SUMO), started at",
-                "the optimum positions above and fed targets of the same demand; exact expected",
-                "free-flow wait (s), mean of 3 target streams:",
-                "",
-                *check,
-                "",
-            ]
-    for kind, path in figures.items():
+    for kind, path in pictures.items():
         rel = path.relative_to(ROOT / "docs")
         lines.append(f"![{experiment.key} {kind}]({rel.as_posix()})")
     lines.append("")
     return lines
 
 
-INTRO = """# Co-simulation with SUMO: the fleet service against SUMO's own taxi dispatch
+def headline(all_figures: dict[str, dict[str, dict[str, Any]]]) -> list[str]:
+    """One row per experiment: the mean waits and the goals of ``sa``."""
+    names = POLICIES.split(",")
+    lines = [
+        "| experiment | " + " | ".join(names) + " | sa p90 / sumo-stop p90 | load (req/veh-h, "
+        "sa busy) | goals met (sa) |",
+        "|---|" + "---|" * len(names) + "---|---|---|",
+    ]
+    for key, figures in all_figures.items():
+        waits = " | ".join(_num(figures.get(n, {}).get("mean_wait_s", math.nan)) for n in names)
+        checks = goal_checks(figures)
+        sa = figures.get("sa", {})
+        p90 = checks[1]["ratio"]
+        lines.append(
+            f"| {key} | {waits} | {_num(p90, '.2f')} "
+            f"| {_num(sa.get('requests_per_vehicle_hour', math.nan), '.2f')}, "
+            f"{_num(100 * sa.get('busy_fraction', math.nan))}% "
+            f"| {sum(c['met'] for c in checks)}/{len(checks)} |"
+        )
+    return lines
 
-Generated by `{command}` ({runtime}); every number below comes
-from that command. Figures: `docs/figures/cosim/`, all summaries:
-`docs/figures/cosim/report.json`.
+
+INTRO = """# Co-simulation with SUMO: the fleet service's dispatch against SUMO's own taxis
+
+Generated by `{command}` ({runtime}). Seeds: {seeds}. Every number below comes from that
+command; the full report is `python bench/cosim_report.py` (3 seeds). {figures}All
+summaries: `docs/figures/cosim/report.json`.
 
 ## What runs
 
-- **SUMO makes the traffic and the demand and measures the outcome.** Background
-  traffic is SUMO's `randomTrips.py` (seeded, validated with `duarouter`). Requests
-  are SUMO persons who appear at a place and ask for a taxi ride (SUMO's taxi
-  device and reservations); rides end at a random place within 1.5 km.
-  - `persons`: places drawn from a 3-hotspot mixture over the car network
-    (`routing_svc.demand.hotspot_mixture`, 20 m atoms), Poisson times.
-  - `incidents`: at Poisson times, the place of a random background vehicle, recorded
-    in a SUMO run of the background traffic alone (same seed), so every policy sees the
-    same incidents and nobody knows their distribution.
-- **Every wait is SUMO's**: the `waitingTime` of the person's `<ride>` in SUMO's
-  tripinfo/personinfo output (request to pick-up). Empty km = the fleet's
-  `routeLength` minus `occupiedDistance` from the same file.
+- **SUMO makes the traffic and the demand and measures the outcome.** Background traffic
+  is SUMO's `randomTrips.py`. Requests are SUMO persons who ask for a taxi ride (SUMO's
+  taxi device and reservations); rides end within 1.5 km.
+  - `persons`: places drawn from a 3-hotspot mixture over the car network, or (the
+    `buildings` experiment) from the buildings of Bad Hersfeld
+    (`--demand buildings:../shared/nets/badhersfeld.buildings.csv`), Poisson times.
+  - `incidents`: at Poisson times, the place of a random background vehicle, recorded in
+    a SUMO run of the background traffic alone, so every policy sees the same incidents.
 - **Policies on identical requests** (same seed, same persons file):
-  - `sa`: this product. The co-simulation asks the fleet service (in-process
-    `InProcessFleetClient`; `--service-url` for a server) which vehicle serves each
-    request (`POST .../targets`, the SA update), dispatches it with
-    `dispatchTaxi` (SUMO dispatch algorithm `traci`); if it is busy, the closest idle
-    vehicle by SUMO's routing goes (a *fallback*). After the drop-off the vehicle
-    drives back to its current reference position and parks. The fleet starts at the
-    p-median of {history} historical requests (persons: drawn from the same
-    distribution; incidents: recorded in another traffic realisation), the paper's
-    deterministic first configuration, where SUMO inserts its vehicles (as it inserts
-    `optimum`'s at its sites), and the SA refines it with every request
-    (the service's defaults: step `a / (k + 1)^0.75` with counters started at the
-    historical requests each vehicle serves, and the backward probe, window 0.05 R).
-  - `sa-cold`: the same without history: it starts at the start positions and
-    learns from the run alone.
-  - `static`: the same dispatch, reference positions frozen at the start positions
-    (random edges, drawn uniformly by length; shared by `sa`, `sa-cold`, `static` and
-    SUMO's policies).
-  - `optimum`: the same dispatch, positions frozen at the best-known p-median of the
-    true distribution (`routing_svc.optimum`, {max_sites} candidate sites; for incidents the
-    hindsight p-median of the realised incidents).
-  - `sumo-stop` / `sumo-circling`: SUMO's taxi device alone, `greedy` dispatch every
-    second, idle algorithm `stop` or `randomCircling`.
-- The *expected free-flow wait* column is the exact expected travel time (free-flow,
-  from the nearest reference position) under the true demand: the SA objective. It
-  ignores congestion, turning, stopping and busy vehicles; SUMO's measured waits add
-  all of those.
+  - `sa`: this product. For each request the co-simulation posts a target to the fleet
+    service (`POST .../targets`): the SA learns from it, and SUMO sends the vehicles named
+    in the answer's `dispatch` block (the closest *available* vehicles by their current
+    positions and the service's travel times). The co-simulation reports every state
+    change SUMO makes to the service (`POST .../vehicles/state:batch`, one batch per
+    simulation step): `busy` at dispatch, `available` with the current position at the
+    drop-off, the positions of available vehicles that drive back to their references
+    (every 30 s while they move). An answer `queued` (nobody available) puts the request
+    in a FIFO queue; at each drop-off the queue is served first, oldest first, asking
+    `POST .../assign` again (read-only). After a drop-off a vehicle drives back to its
+    reference and parks; an idle vehicle whose reference moves drives to the new one.
+    Whose reference learns is the paper's choice, `learning_vehicles=all` (the closest
+    reference moves, busy or not), with the {rule} learning rule; the fleet starts at the
+    p-median of {history} historical requests.
+  - `sa-available`: the same with `learning_vehicles=available` (the closest reference
+    among the available vehicles moves). Under the `consolidating` rule the references
+    move mostly at consolidations (the p-median of a reservoir of recent targets), which
+    do not depend on who is available, and its held steps move rarely: where the two rows
+    are equal, the choice of learning vehicles changed no reference in that run
+    (`--rule paper` compares the two choices under the paper's step alone).
+  - `optimum`: the same dispatch, references frozen at the best-known p-median of the
+    demand (for incidents: the hindsight p-median of the realised incidents).
+  - `sumo-stop`: SUMO's taxi device alone, `greedy` dispatch every second, idle taxis stop
+    where they dropped their customer.
+  - `sumo-taxistand`: SUMO's taxi device alone, `greedy` dispatch, idle algorithm
+    `taxistand`: one stand (a `parkingArea` in an additional file, listed by the rerouter
+    that `device.taxi.stands-rerouter` names) at each of `optimum`'s sites, where the taxis
+    also start; an idle taxi drives to the closest stand (`parking.ignoreDest`).
+- **Measures, all from SUMO.** A request's wait is the `waitingTime` of the person's
+  `<ride>` in SUMO's personinfo output (request to pick-up). Service levels are over every
+  request of the measured period: the 90th percentile (nearest rank) and the fraction
+  served within the fleet's thresholds ({thresholds} s); a request never served counts as
+  an infinite wait. Empty km = the fleet's `routeLength` minus `occupiedDistance`. Load:
+  requests per vehicle-hour, and the busy fraction, the share of SUMO taxi states sampled
+  every 10 s in the request period that are driving to a pick-up or carrying a customer.
+- **Goals** (issue "live operations"), per experiment, on the means over the seeds: `sa`'s
+  mean wait ≤ 0.8 x `sumo-stop`'s; `sa`'s 90th-percentile wait ≤ 0.8 x `sumo-stop`'s;
+  `sa`'s mean wait ≤ 1.05 x `optimum`'s. A missed goal gives the ratio and how many
+  seconds `sa` is above what the goal allows, with the experiment's load.
 
 ## How to run it
 
 ```
-routing-svc cosim --net drt --vehicles 10 --hours 2 --seeds 0,1,2 --history 1000
-routing-svc cosim --net drt --mode incidents --traffic-costs 60 --policies sa,optimum
-routing-svc cosim --net drt --policies sa,sa-floor --shift-at 3600 --history 1000
-routing-svc cosim --net drt --service-url http://127.0.0.1:8000 --policies sa
-routing-svc cosim --net grid --gui --policies sa --duration 900     # watch it in sumo-gui
+python bench/cosim_report.py                                  # everything, 3 seeds
+python bench/cosim_report.py --seeds 0 --only drt-persons-10  # a part
+python bench/cosim_report.py --seeds 0 --hours 1 --render-only  # this document from the runs
+routing-svc cosim --net drt --vehicles 10 --hours 2 --seeds 0,1,2 --history 1000 \\
+    --policies sa,sa-available,optimum,sumo-stop,sumo-taxistand
 ```
+{missing}
+## Headline: mean SUMO-measured wait (s), mean of the seeds
 
-Each prints a JSON summary per policy and writes `summary.json`, `runs.json`, SUMO's
-inputs and outputs and three PNGs under `--out` (default `cosim-out/`). From Python:
-
-```python
-from pathlib import Path
-from routing_svc.sim import CosimSpec, parse_policies, run_cosim
-from routing_svc.sim.plots import write_figures
-
-spec = CosimSpec(
-    network="drt",
-    vehicles=10,
-    seeds=(0, 1, 2),
-    history=1000,
-    policies=parse_policies("sa,optimum,sumo-stop"),
-)
-result = run_cosim(spec, out_dir=Path("out"))
-result.summary()["policies"]["sa"]["mean_wait_s"]
-write_figures(result, out_dir=Path("out"), prefix="cosim")
-```
-
-The tests (`python -m pytest tests/sim`, real SUMO through libsumo and TraCI on the
-generated 6x6 `grid`, a few simulated minutes per run) cover every policy and both
-demand modes, check that the waits are SUMO's personinfo values and that a seed gives
-the same result twice (also across processes and through a running HTTP service).
 """
 
 
-def _facts(result: CosimResult) -> dict[str, Any]:
-    """The numbers the headline and the notes quote, for one experiment."""
-    rows = _policy_rows(result)
-    facts: dict[str, Any] = {
-        "mode": result.spec.mode,
-        "vehicles": result.spec.vehicles,
-        "network": Path(result.spec.network).name.split(".")[0],
-        "shift": result.spec.shift_at is not None,
-        "live": result.spec.traffic_period is not None,
-        "wait": {k: v["wait"][0] for k, v in rows.items()},
-        "late": {k: v["late"][0] for k, v in rows.items()},
-        "expected": {k: v["expected"] for k, v in rows.items()},
-        "lost": {k: v["left"] for k, v in rows.items()},
-        "sd": {k: v["wait"][1] for k, v in rows.items()},
-        "requests": float(np.mean([r.requests for r in result.runs])),
-        "runs": len(result.runs),
-        "wall_seconds": float(sum(r.wall_seconds for r in result.runs)),
-        "sim_seconds": float(sum(r.sim_seconds for r in result.runs)),
-        "empty_km": {k: v["empty_km"] for k, v in rows.items()},
-        "speed": {k: v["speed"] for k, v in rows.items()},
-        "optimum": float(np.mean([o.expected_cost for o in result.optimum.values() if o])),
-        "fallback_share": {},
-        "overhead": {},
-        "lost_share": {
-            k: v["left"] / (result.spec.vehicles * len(result.spec.seeds)) for k, v in rows.items()
-        },
-        "tracking": {},
-    }
-    for name, runs in result.by_policy().items():
-        if name in ("sa", "sa-cold"):
-            never = [
-                sum(
-                    1
-                    for vehicle, start in r.snapshots[0][1].items()
-                    if tuple(start) == tuple(r.snapshots[-1][1][vehicle])
-                )
-                for r in runs
-                if r.snapshots
-            ]
-            facts.setdefault("never_moved", {})[name] = float(np.mean(never)) if never else 0.0
-    if result.spec.shift_at is not None:
-        shift = result.spec.warmup + result.spec.shift_at
-        for name in ("sa", "sa-floor"):
-            curves = [c for (p, _), c in result.curves.items() if p == name]
-            if curves:
-                before = np.mean([[v for t, v in c if t < shift][-1] for c in curves])
-                after = np.mean([next(v for t, v in c if t >= shift) for c in curves])
-                end = np.mean([c[-1][1] for c in curves])
-                facts["tracking"][name] = [float(before), float(after), float(end)]
-    for name, runs in result.by_policy().items():
-        pairs = _served_pairs(runs)
-        if pairs:
-            direct = [(p[0], w) for p, w in pairs if not p[1]]
-            facts["fallback_share"][name] = sum(1 for p, _ in pairs if p[1]) / len(pairs)
-            if direct:
-                facts["overhead"][name] = float(np.mean([w - t for t, w in direct]))
-    return facts
-
-
-def _headline(facts: dict[str, dict[str, Any]]) -> list[str]:
-    order = ["sa", "sa-cold", "static", "optimum", "sumo-stop", "sumo-circling"]
-    lines = [
-        "| experiment | "
-        + " | ".join(order)
-        + " | sa vs optimum | sa vs sumo-stop | sa's chosen vehicle busy |",
-        "|---|" + "---|" * (len(order) + 3),
-    ]
-    for key, f in facts.items():
-        if f["shift"] or f["live"]:
-            continue
-        wait = f["wait"]
-        cells = " | ".join(f"{wait[p]:.0f}" if p in wait else "" for p in order)
-        vs_opt = f"{wait['sa'] / wait['optimum'] - 1:+.0%}" if "optimum" in wait else ""
-        vs_stop = f"{wait['sa'] / wait['sumo-stop'] - 1:+.0%}" if "sumo-stop" in wait else ""
-        busy = f["fallback_share"].get("sa", math.nan)
-        lines.append(f"| {key} | {cells} | {vs_opt} | {vs_stop} | {busy:.0%} |")
-    return lines
-
-
-def _span(values: list[float], fmt: str) -> str:
-    values = [v for v in values if math.isfinite(v)]
-    if not values:
-        return "n/a"
-    low, high = min(values), max(values)
-    return format(low, fmt) if low == high else f"{format(low, fmt)} to {format(high, fmt)}"
-
-
-def _notes(facts: dict[str, dict[str, Any]]) -> str:
-    main = [f for f in facts.values() if not f["shift"] and not f["live"]]
-    persons = [f for f in main if f["mode"] == "persons"]
-    gap_expected = [
-        f["expected"]["sa"] / f["optimum"] - 1 for f in persons if "sa" in f["expected"]
-    ]
-    share_sa = [f["fallback_share"].get("sa", math.nan) for f in main]
-    share_opt = [f["fallback_share"].get("optimum", math.nan) for f in main]
-    overhead = [v for f in main for v in f["overhead"].values()]
-    lost = [f["lost_share"].get("sumo-circling", math.nan) for f in main]
-    empty_ratio = [
-        f["empty_km"]["sa"] / f["empty_km"]["sumo-stop"]
-        for f in main
-        if "sa" in f["empty_km"] and f["empty_km"].get("sumo-stop")
-    ]
-    return NOTES.format(
-        gap_expected=_span(gap_expected, "+.0%"),
-        share_sa=_span(share_sa, ".0%"),
-        share_opt=_span(share_opt, ".0%"),
-        overhead=_span(overhead, ".0f"),
-        lost=_span(lost, ".0%"),
-        tracking=_tracking_note(facts),
-        never_moved=_span(
-            [f.get("never_moved", {}).get("sa", math.nan) / f["vehicles"] for f in main], ".0%"
-        ),
-        never_moved_cold=_span(
-            [f.get("never_moved", {}).get("sa-cold", math.nan) / f["vehicles"] for f in main],
-            ".0%",
-        ),
-        requests=f"{np.mean([f['requests'] for f in main]):.0f}",
-        spread=_span([sd for f in main for sd in f["sd"].values()], ".0f"),
-        saturated=_saturation_note(_headline_facts(facts)),
-        versus_stop=_versus_stop(_headline_facts(facts)),
-        versus_opt=_versus_opt(_headline_facts(facts)),
-        empty_ratio=_span(empty_ratio, ".1f"),
-    )
-
-
-def _headline_facts(facts: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
-    """The experiments of the headline (no tracking, no live travel times)."""
-    return {k: f for k, f in facts.items() if not f["shift"] and not f["live"]}
-
-
-def _versus_opt(facts: dict[str, dict[str, Any]]) -> str:
-    gaps = {
-        key: f["wait"]["sa"] / f["wait"]["optimum"] - 1.0
-        for key, f in facts.items()
-        if "sa" in f["wait"] and "optimum" in f["wait"]
-    }
-    met = [f"{k} ({v:+.0%})" for k, v in gaps.items() if v <= 0.10]
-    unmet = [f"{k} ({v:+.0%})" for k, v in gaps.items() if v > 0.10]
-    parts = []
-    if met:
-        parts.append("Met in " + ", ".join(met) + ".")
-    if unmet:
-        parts.append("Not met in " + ", ".join(unmet) + ".")
-    return " ".join(parts)
-
-
-def _versus_stop(facts: dict[str, dict[str, Any]]) -> str:
-    cuts = {
-        key: 1.0 - f["wait"]["sa"] / f["wait"]["sumo-stop"]
-        for key, f in facts.items()
-        if "sa" in f["wait"] and "sumo-stop" in f["wait"]
-    }
-    met = [f"{k} ({-v:+.0%})" for k, v in cuts.items() if v >= 0.20]
-    unmet = [f"{k} ({-v:+.0%})" for k, v in cuts.items() if v < 0.20]
-    parts = []
-    if met:
-        parts.append("Target (mean wait at least 20% lower) met in " + ", ".join(met) + ".")
-    if unmet:
-        parts.append("Not met in " + ", ".join(unmet) + ".")
-    frozen = [
-        f"{key} ({f['wait']['optimum'] / f['wait']['sumo-stop'] - 1:+.0%})"
-        for key, f in facts.items()
-        if "optimum" in f["wait"] and "sumo-stop" in f["wait"]
-    ]
-    if frozen:
-        parts.append(
-            "For comparison, positions frozen at the p-median (`optimum`) against "
-            "`sumo-stop`: " + ", ".join(frozen) + "."
-        )
-    return " ".join(parts)
-
-
-def _saturation_note(facts: dict[str, dict[str, Any]]) -> str:
-    busy = {
-        key: f["fallback_share"]["sa"]
-        for key, f in facts.items()
-        if "sa" in f["fallback_share"] and f["fallback_share"]["sa"] > 0.5
-    }
-    if not busy:
-        return ""
-    names = ", ".join(f"{key}: {share:.0%}" for key, share in busy.items())
-    return (
-        "- **Saturated fleets.** Where most of `sa`'s requests find their chosen vehicle\n"
-        f"  busy ({names}), vehicles are rarely at their reference positions when a request\n"
-        "  comes: where the references are matters little, every policy waits long, and\n"
-        "  SUMO's dispatch, which picks the closest idle taxi wherever it is, is as good as\n"
-        "  or better than the service's choice by reference position."
-        + (
-            " The `-light`\n  experiment halves the request rate on the same network to show"
-            " the other regime."
-            if any(key.endswith("-light") for key in facts)
-            else ""
-        )
-    )
-
-
-def _tracking_note(facts: dict[str, dict[str, Any]]) -> str:
-    found = [f["tracking"] for f in facts.values() if f["tracking"]]
-    if not found or not {"sa", "sa-floor"} <= set(found[0]):
-        return ""
-    sa, floor = found[0]["sa"], found[0]["sa-floor"]
-    return (
-        "- **Tracking.** When the hotspots move, the expected wait of both SA fleets jumps\n"
-        f"  (decreasing step: {sa[0]:.1f} s before, {sa[1]:.1f} s just after,\n"
-        f"  {sa[2]:.1f} s at the end; floored step: {floor[0]:.1f}, {floor[1]:.1f},\n"
-        f"  {floor[2]:.1f} s). The floored step\n"
-        f"  recovers {floor[1] - floor[2]:.1f} s in the second hour against {sa[1] - sa[2]:.1f} s\n"
-        "  for the decreasing step, whose steps are already small after the history; the\n"
-        "  price of the floor is a noisier configuration before the move (the optimum\n"
-        "  before and after the move is in the tracking table)."
-    )
-
-
-def _render(
+def render(
+    all_figures: dict[str, dict[str, dict[str, Any]]],
     sections: list[str],
-    report: dict[str, Any],
-    facts: dict[str, dict[str, Any]],
     *,
+    command: str,
+    seeds: Sequence[int],
+    history: int,
+    rule: str | None,
     left_out: list[str],
+    pictures: bool,
 ) -> str:
-    """The whole markdown document (``left_out``: experiments of the full list not run)."""
-    first: dict[str, Any] = next(iter(report.values()), {})
-    history = first.get("spec", {}).get("history", 0)
-    missing = (
-        ""
-        if BADHERSFELD.is_file()
-        else ("\n> Bad Hersfeld was skipped: `../shared/nets/badhersfeld.net.xml.gz` is missing.\n")
-    )
-    if left_out:
-        missing += (
-            "\n> This run of the report (`--only`) leaves out these experiments of the full "
-            "list: " + ", ".join(f"`{key}`" for key in left_out) + ".\n"
-        )
-    runs = sum(f["runs"] for f in facts.values())
-    simulated = sum(f["sim_seconds"] for f in facts.values()) / 3600.0
-    wall = sum(f["wall_seconds"] for f in facts.values()) / 60.0
+    """The whole document."""
+    runs = sum(p["seeds"] for f in all_figures.values() for p in f.values())
+    simulated = sum(p["sim_seconds"] for f in all_figures.values() for p in f.values()) / 3600.0
+    wall = sum(p["wall_seconds"] for f in all_figures.values() for p in f.values()) / 60.0
     runtime = (
         f"{runs} SUMO runs, {simulated:.0f} simulated hours, {wall:.0f} min of SUMO wall time "
-        f"on a shared 2-core machine, 2 runs at a time"
+        "on a shared 2-core machine"
     )
-    command = "python bench/cosim_report.py"
+    missing = ""
+    if not BADHERSFELD.is_file():
+        missing += (
+            "\n> Bad Hersfeld was skipped: `../shared/nets/badhersfeld.net.xml.gz` is missing.\n"
+        )
     if left_out:
-        command += " --only " + ",".join(facts)
-    text = INTRO.format(runtime=runtime, history=history, command=command, max_sites=MAX_SITES)
-    headline = [
-        "## Headline: mean SUMO-measured wait (s), mean of the seeds",
+        missing += (
+            "\n> This run leaves out these experiments of the full list: "
+            + ", ".join(f"`{key}`" for key in left_out)
+            + ".\n"
+        )
+    met = sum(c["met"] for f in all_figures.values() for c in goal_checks(f))
+    total = sum(len(goal_checks(f)) for f in all_figures.values())
+    text = INTRO.format(
+        command=command,
+        runtime=runtime,
+        seeds=", ".join(map(str, seeds)),
+        history=history,
+        rule=f"`{rule}`" if rule else "service's default (`consolidating`)",
+        figures="Figures: `docs/figures/cosim/`. " if pictures else "",
+        thresholds=", ".join(f"{t:g}" for t in DEFAULT_THRESHOLDS),
+        missing=missing,
+    )
+    summary = [
+        *headline(all_figures),
         "",
-        *_headline(facts),
+        f"`sa` meets {met} of the {total} goal checks of this run.",
+        "",
+        "## Results",
         "",
     ]
-    return "\n".join([text, missing, *headline, _notes(facts), "## Results", "", *sections])
+    return text + "\n".join(summary + sections)
 
 
-NOTES = """## What the numbers say (and where the targets are not met)
+def _saved_runs(out_dir: Path) -> tuple[dict[str, Any], list[PolicyRun]] | None:
+    """The summary and runs an earlier report saved in ``out_dir`` (``None``: not finished)."""
+    summary, runs = out_dir / "summary.json", out_dir / "runs.json"
+    if not (summary.is_file() and runs.is_file()):
+        return None
+    saved = json.loads(runs.read_text(encoding="utf-8"))
+    return (
+        json.loads(summary.read_text(encoding="utf-8")),
+        [PolicyRun.from_json(r) for r in saved["runs"]],
+    )
 
-- **`sa` against `optimum` (target: within 10%).** {versus_opt} Where `sa` is
-  farther, three reasons are measured here:
-  1. *Where the references are.* The exact expected free-flow wait of the `sa`
-     reference positions at the end of the runs is {gap_expected} against the true
-     p-median's (tables: "expected free-flow wait at end"; for incidents the p-median
-     is the hindsight one of the realised incidents). On a directed road network the
-     expected wait jumps where a reference passes a target or gives up the turns of a
-     junction, which the paper's step does not see; the tables "Is the p-median a
-     fixed point of the SA?" run the SA alone, without SUMO, from the p-median, with
-     the paper's rule and with the service's backward probe that estimates that jump
-     term. `sa-cold` shows what the SA reaches from the start positions without a
-     first configuration.
-  2. *Busy vehicles.* The service chooses by reference position, ignoring where
-     vehicles are now. When the chosen vehicle is busy another one goes (a fallback,
-     from wherever it is): {share_sa} of `sa`'s requests against {share_opt} of
-     `optimum`'s. The SA gathers several vehicles' updates on the busiest places and
-     leaves others where demand is thin, so its chosen vehicle is busy more often.
-  3. *Stranded vehicles.* A vehicle that starts where it is never the nearest to a
-     request is never chosen and never moves (the "dead unit" of online k-means):
-     {never_moved} of `sa`'s vehicles (`sa-cold`: {never_moved_cold}) ended exactly
-     where they started the two hours
-     (positions figures: circles without an arrow).
-- **Much of the measured wait is not about positions.** Even when the chosen vehicle
-  went, SUMO's wait exceeds the service's free-flow estimate by {overhead} s on average
-  (per experiment and policy): leaving the parking place, accelerating, traffic lights
-  and congestion, turning, stopping at the person and boarding. Relative differences
-  between policies are therefore smaller in SUMO's waits than in the expected
-  free-flow waits.
-- **`sa` against SUMO's own dispatch (`sumo-stop`).** {versus_stop} With idle
-  algorithm `stop`, SUMO's taxis wait where they dropped their last customer, i.e.
-  where rides *end* (spread around the hotspots) rather than where they start, but
-  SUMO sends the closest idle taxi by its *current* position; `sa` sends the vehicle
-  whose *reference* is closest and drives every vehicle back to its reference after
-  each ride. The price of returning is empty driving: `sa` drives {empty_ratio} times
-  the empty kilometres of `sumo-stop`.
-{saturated}
-- **`sumo-circling` loses its taxis.** SUMO's `randomCircling` drives idle taxis along
-  random successors; on these real networks they reach edges that leave the network
-  and drop out of the simulation ({lost} of its taxis by the end of a run; column
-  "vehicles lost", summed over the seeds). Its waits show a shrinking fleet, not the
-  merit of circling. (Very rarely SUMO also fails to insert a pick-up stop on a very
-  short edge and a taxi of another policy drives off the end of its route; the same
-  column counts those.)
-- **Incidents.** The incidents' `optimum` is the hindsight p-median of the very
-  incidents that happened: an optimistic bound nobody could deploy in advance. `sa`
-  learnt from incidents recorded in another traffic realisation.
-{tracking}
-- **Noise.** Each run has about {requests} requests; the standard deviation of a
-  policy's mean wait over the seeds (the ± columns) is {spread} s. Differences
-  smaller than that are not significant.
-"""
+
+def _seeds(text: str) -> tuple[int, ...]:
+    try:
+        seeds = tuple(int(s) for s in text.split(",") if s.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seeds must be integers, got {text!r}") from None
+    if not seeds or any(s < 0 for s in seeds):
+        raise argparse.ArgumentTypeError("give at least one seed >= 0")
+    return seeds
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -763,51 +475,112 @@ def main(argv: list[str] | None = None) -> int:
         "--workdir", type=Path, default=Path.home() / ".cache" / "routing_svc" / "cosim-report"
     )
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--seeds", type=_seeds, default=(0, 1, 2), help="comma list of seeds")
     parser.add_argument("--hours", type=float, default=2.0)
     parser.add_argument("--rate", type=float, default=40.0, help="requests per hour")
     parser.add_argument("--history", type=int, default=1000)
+    parser.add_argument(
+        "--rule",
+        choices=["consolidating", "probe", "paper"],
+        default=None,
+        help="learning rule of the service's fleets (default: the service's)",
+    )
     parser.add_argument("--only", default=None, help="comma list of experiment keys")
     parser.add_argument("--no-resume", action="store_true")
+    parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    parser.add_argument(
+        "--render-only",
+        action="store_true",
+        help="run nothing: write the report from the experiments finished in --workdir "
+        "(without figures); unfinished ones are listed as left out",
+    )
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
-    experiments = _experiments(args)
+    chosen = experiments(
+        seeds=args.seeds,
+        hours=args.hours,
+        rate=args.rate,
+        history=args.history,
+        workers=args.workers,
+        rule=args.rule,
+    )
     left_out: list[str] = []
     if args.only:
-        keep = set(args.only.split(","))
-        unknown = sorted(keep - {e.key for e in experiments})
+        keep = {k.strip() for k in args.only.split(",") if k.strip()}
+        unknown = sorted(keep - {e.key for e in chosen})
         if unknown:
             parser.error(
                 f"--only: unknown experiment(s) {', '.join(unknown)}; "
-                f"known: {', '.join(e.key for e in experiments)}"
+                f"known: {', '.join(e.key for e in chosen)}"
             )
-        left_out = [e.key for e in experiments if e.key not in keep]
-        experiments = [e for e in experiments if e.key in keep]
+        left_out = [e.key for e in chosen if e.key not in keep]
+        chosen = [e for e in chosen if e.key in keep]
     FIGURES.mkdir(parents=True, exist_ok=True)
     sections: list[str] = []
     report: dict[str, Any] = {}
-    facts: dict[str, dict[str, Any]] = {}
+    all_figures: dict[str, dict[str, dict[str, Any]]] = {}
     started = time.perf_counter()
-    for experiment in experiments:
+    for experiment in chosen:
         t0 = time.perf_counter()
-        print(f"[cosim report] {experiment.key} ...", file=sys.stderr, flush=True)
-        result = run_cosim(
-            experiment.spec,
-            out_dir=args.workdir / experiment.key,
-            progress=not args.quiet,
-            resume=not args.no_resume,
-        )
-        figures = write_figures(result, out_dir=FIGURES, prefix=experiment.key)
-        sections += _section(experiment, result, figures)
-        report[experiment.key] = result.summary()
-        facts[experiment.key] = _facts(result)
-        report[experiment.key]["facts"] = facts[experiment.key]
+        out_dir = args.workdir / experiment.key
+        if args.render_only:
+            saved = _saved_runs(out_dir)
+            if saved is None:
+                left_out.append(experiment.key)
+                continue
+            by_policy: dict[str, list[PolicyRun]] = {}
+            for run in saved[1]:
+                by_policy.setdefault(run.policy, []).append(run)
+            summary, pictures = saved[0], {}
+        else:
+            print(f"[cosim report] {experiment.key} ...", file=sys.stderr, flush=True)
+            result: CosimResult = run_cosim(
+                experiment.spec,
+                out_dir=out_dir,
+                progress=not args.quiet,
+                resume=not args.no_resume,
+            )
+            by_policy = result.by_policy()
+            summary = result.summary()
+            pictures = (
+                {}
+                if args.no_figures
+                else write_figures(result, out_dir=FIGURES, prefix=experiment.key)
+            )
+        figures = {name: policy_figures(runs) for name, runs in by_policy.items()}
+        sections += section(experiment, figures, pictures)
+        all_figures[experiment.key] = figures
+        report[experiment.key] = {
+            **summary,
+            "figures": figures,
+            "goals": {p: goal_checks(figures, p) for p in ("sa", "sa-available") if p in figures},
+        }
         print(
             f"[cosim report] {experiment.key} done in {time.perf_counter() - t0:.0f} s",
             file=sys.stderr,
+            flush=True,
         )
     (FIGURES / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
-    text = _render(sections, report, facts, left_out=left_out)
+    command = "python bench/cosim_report.py --seeds " + ",".join(map(str, args.seeds))
+    for option, value, default in (("--hours", args.hours, 2.0), ("--rate", args.rate, 40.0)):
+        if value != default:
+            command += f" {option} {value:g}"
+    if args.history != 1000:
+        command += f" --history {args.history}"
+    if args.rule is not None:
+        command += f" --rule {args.rule}"
+    if args.only:
+        command += f" --only {args.only}"
+    text = render(
+        all_figures,
+        sections,
+        command=command,
+        seeds=args.seeds,
+        history=args.history,
+        rule=args.rule,
+        left_out=left_out,
+        pictures=not (args.no_figures or args.render_only),
+    )
     (ROOT / "docs" / "cosim.md").write_text(text, encoding="utf-8")
     print(
         f"[cosim report] wrote docs/cosim.md in {time.perf_counter() - started:.0f} s",

@@ -48,6 +48,14 @@ class FleetClient(Protocol):
 
     def put_traveltimes(self, fleet_id: str, times: Mapping[str, float]) -> dict[str, Any]: ...
 
+    def put_vehicle_state(
+        self, fleet_id: str, vehicle: str, state: Mapping[str, Any]
+    ) -> dict[str, Any]: ...
+
+    def put_vehicle_states(
+        self, fleet_id: str, states: Sequence[Mapping[str, Any]]
+    ) -> dict[str, Any]: ...
+
     def metrics(self, fleet_id: str) -> dict[str, Any]: ...
 
 
@@ -136,6 +144,22 @@ class HttpFleetClient:
         return self._json(
             self._http.put(f"/v1/fleets/{fleet_id}/traveltimes", json={"times": dict(times)})
         )
+
+    def put_vehicle_state(
+        self, fleet_id: str, vehicle: str, state: Mapping[str, Any]
+    ) -> dict[str, Any]:
+        """``PUT .../vehicles/{vehicle}/state`` with ``state`` (``status``, optionally
+        ``position`` and ``timestamp``)."""
+        return self._json(
+            self._http.put(f"/v1/fleets/{fleet_id}/vehicles/{vehicle}/state", json=dict(state))
+        )
+
+    def put_vehicle_states(
+        self, fleet_id: str, states: Sequence[Mapping[str, Any]]
+    ) -> dict[str, Any]:
+        """``POST .../vehicles/state:batch``: each state names its ``vehicle``; all or none."""
+        body = {"changes": [dict(s) for s in states]}
+        return self._json(self._http.post(f"/v1/fleets/{fleet_id}/vehicles/state:batch", json=body))
 
     def metrics(self, fleet_id: str) -> dict[str, Any]:
         return self._json(self._http.get(f"/v1/fleets/{fleet_id}/metrics"))

@@ -18,7 +18,14 @@ from pydantic import ValidationError
 from routing_svc.errors import Conflict, InvalidInput
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.networks import NetworkRegistry
-from routing_svc.service.schemas import FleetSpec, TargetSpec, TravelTimes
+from routing_svc.service.schemas import (
+    FleetSpec,
+    TargetSpec,
+    TravelTimes,
+    VehicleStateBatch,
+    VehicleStateChange,
+    VehicleStateSpec,
+)
 from routing_svc.store import EventLog
 
 
@@ -111,6 +118,19 @@ class InProcessFleetClient:
     def put_traveltimes(self, fleet_id: str, times: Mapping[str, float]) -> dict[str, Any]:
         body = _validated(TravelTimes, {"times": dict(times)})
         return self.service.put_travel_times(fleet_id, dict(body.times))
+
+    def put_vehicle_state(
+        self, fleet_id: str, vehicle: str, state: Mapping[str, Any]
+    ) -> dict[str, Any]:
+        _validated(VehicleStateSpec, state)  # the route's body: no ``vehicle`` inside
+        change = _validated(VehicleStateChange, {**state, "vehicle": vehicle})
+        return self.service.put_vehicle_states(fleet_id, [change])
+
+    def put_vehicle_states(
+        self, fleet_id: str, states: Sequence[Mapping[str, Any]]
+    ) -> dict[str, Any]:
+        batch = _validated(VehicleStateBatch, {"changes": [dict(s) for s in states]})
+        return self.service.put_vehicle_states(fleet_id, batch.changes)
 
     def metrics(self, fleet_id: str) -> dict[str, Any]:
         return self.service.metrics(fleet_id)

@@ -1,4 +1,4 @@
-"""SUMO co-simulation: SUMO makes the demand, the fleet service positions the fleet.
+"""SUMO co-simulation: SUMO makes the demand, the fleet service positions and dispatches the fleet.
 
 ::
 
@@ -6,9 +6,10 @@
         spec.py       CosimSpec: what to simulate
         prepare.py    background traffic (randomTrips), requests, starts, optimum
         run.py        one policy in one SUMO process -> PolicyRun (waits from SUMO)
-        dispatcher.py reservations -> fleet service -> dispatchTaxi / park at reference
+        dispatcher.py reservations -> fleet service's dispatch -> dispatchTaxi; vehicle
+                      states back to the service; FIFO queue; park at reference
         backend.py    SimBackend: LibsumoBackend (lazy libsumo), TraciBackend (GUI)
-        measures.py   SUMO's tripinfo/personinfo -> waits, empty km
+        measures.py   SUMO's tripinfo/personinfo -> waits, service levels, empty km, load
     write_figures(result, out_dir=..., prefix=...)  (plots.py)
 
 ``routing-svc cosim`` (:mod:`routing_svc.sim.command`) is the command line.

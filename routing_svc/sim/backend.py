@@ -106,6 +106,10 @@ class SimBackend(Protocol):
         """Distance driven along the vehicle's current lane."""
         ...
 
+    def vehicle_position(self, vehicle: str) -> tuple[str, float]:
+        """``(edge, offset)`` of a vehicle: on a junction, the start of the edge it enters next."""
+        ...
+
     def route_time(self, from_edge: str, to_edge: str, vtype: str) -> float:
         """SUMO's current travel time of the fastest route between two edges (inf if none)."""
         ...
@@ -188,6 +192,12 @@ class _ApiBackend:
 
     def lane_position(self, vehicle: str) -> float:
         return float(self.api.vehicle.getLanePosition(vehicle))
+
+    def vehicle_position(self, vehicle: str) -> tuple[str, float]:
+        road = str(self.api.vehicle.getRoadID(vehicle))
+        if road and not road.startswith(":"):
+            return road, self.lane_position(vehicle)
+        return self.current_edge(vehicle), 0.0
 
     def route_time(self, from_edge: str, to_edge: str, vtype: str) -> float:
         try:

@@ -10,8 +10,9 @@ Examples::
     routing-svc cosim --net drt --service-url http://127.0.0.1:8000 --policies sa
     routing-svc cosim --net grid --gui --policies sa --seeds 0
 
-Prints the JSON summary (one entry per policy: SUMO's mean wait, requests
-served, empty km, fallbacks, simulation speed); writes it with the inputs,
+Prints the JSON summary (one entry per policy: SUMO's mean and 90th-percentile
+wait, the fraction within 300/600/900 s, requests served, empty km, requests
+per vehicle-hour, busy fraction, simulation speed); writes it with the inputs,
 SUMO's outputs and the PNG plots under ``--out``.
 """
 
@@ -41,7 +42,7 @@ def add_parser(subparsers: Any) -> None:
     """Add ``cosim`` to the ``routing-svc`` command line."""
     p = subparsers.add_parser(
         "cosim",
-        help="SUMO co-simulation: SA vs static, optimum and SUMO's own taxi dispatch",
+        help="SUMO co-simulation: the service's dispatch and SA vs optimum and SUMO's own taxis",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -79,8 +80,8 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument(
         "--policies",
         default=None,
-        help="comma list (default: sa,static,optimum,sumo-stop,sumo-circling; "
-        "also sa-cold, sa-floor)",
+        help="comma list (default: sa,sa-available,optimum,sumo-stop,sumo-taxistand; "
+        "also sa-cold, sa-floor, static, sumo-circling)",
     )
     p.add_argument("--seeds", type=_seeds, default=(0,), help="comma list of seeds")
     p.add_argument("--workers", type=int, default=2, help="parallel SUMO processes")

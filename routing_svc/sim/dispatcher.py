@@ -1,21 +1,36 @@
-"""Dispatch SUMO's taxi reservations by asking the fleet service.
+"""Dispatch SUMO's taxi reservations with the vehicles the fleet service names.
+
+The service decides who goes (the ``dispatch`` block of its answer: the
+closest *available* vehicles by their current positions); SUMO drives them.
+The co-simulation keeps the service's view of the vehicles true by reporting
+their states as SUMO changes them (``PUT .../vehicles/state`` in batches):
+
+- ``busy`` when a vehicle is dispatched;
+- ``available`` at its drop-off, with its current position;
+- the current position of an available vehicle that drives (back to its
+  reference), every ``position_period`` seconds while it moves;
+- ``offline`` if it leaves the simulation.
 
 After every simulation step, :meth:`FleetDispatcher.on_step`:
 
-1. pushes SUMO's current edge travel times to the fleet every
-   ``traffic_period`` seconds (``PUT .../traveltimes``), if asked to;
-2. for each new reservation (a person asking for a ride), asks the service
-   which vehicle serves it: ``POST .../targets`` (the SA update; the ``sa``
-   policy) or ``POST .../assign`` (no update; ``static`` and ``optimum``).
-   The vehicle whose *reference position* reaches the target first serves it.
-   If that vehicle is busy, the closest idle vehicle by SUMO's current travel
-   times serves it instead (a *fallback*, counted); if none is idle, the
-   request waits in a queue for the next vehicle that becomes idle;
-3. sends every vehicle that has just finished a job back to its current
-   (possibly updated) reference position, or to the oldest queued request.
+1. pushes SUMO's current edge travel times every ``traffic_period`` seconds
+   (``PUT .../traveltimes``), if asked to;
+2. reports the vehicles that dropped their customer off as available and
+   serves the waiting requests first, oldest first, asking ``/assign`` again
+   (read-only) for each: the request was already learnt from when it came;
+3. asks the service about each new reservation: ``POST .../targets`` (the
+   SA learns from it; ``sa`` policies) or ``POST .../assign`` (frozen
+   references; ``static``, ``optimum``). A ``dispatched`` answer sends the
+   vehicle it names; ``queued`` (nobody available) puts the request in a
+   FIFO queue; ``partial`` sends the vehicles named (the first carries the
+   customer, the others drive to the pick-up and wait with it) and queues
+   the rest;
+4. sends every idle vehicle whose reference is elsewhere to its reference
+   (after a drop-off, or when a learning step moved it);
+5. sends the state changes of the step in one batch.
 
-Idle vehicles (SUMO's ``device.taxi.state`` 0) are those parked at their
-reference and those driving back to it.
+Before any question to the service the staged changes are sent, so an
+answer never names a vehicle that was dispatched a moment ago.
 """
 
 from __future__ import annotations
@@ -34,12 +49,14 @@ from routing_svc.sim.backend import (
     SimBackend,
     SimulationError,
 )
-from routing_svc.sim.inputs import FLEET_TYPE
 
-__all__ = ["DispatchLog", "FleetDispatcher", "Snapshot"]
+__all__ = ["DispatchLog", "FleetDispatcher", "Snapshot", "Waiting"]
 
 #: Live travel times are clipped to at most this multiple of the free-flow time.
 MAX_SLOWDOWN = 20.0
+
+#: A moving vehicle's position is reported again once it is this far (m) from the last report.
+POSITION_TOLERANCE = 1.0
 
 Position = tuple[str, float]
 
@@ -53,27 +70,52 @@ class Snapshot:
 
 
 @dataclass(slots=True)
+class Waiting:
+    """A request that waits for vehicles (FIFO).
+
+    ``requires`` is what is still missing (``None``: any one vehicle);
+    ``carrier`` the vehicle already sent that carries the customer, if any;
+    ``orphaned`` whether a carrier left the simulation before the drop-off.
+    """
+
+    reservation: Reservation
+    requires: tuple[str, ...] | None = None
+    carrier: str | None = None
+    orphaned: bool = False
+
+
+@dataclass(slots=True)
 class DispatchLog:
     """What the dispatcher did during a run."""
 
     requests: int = 0
-    fallbacks: int = 0
-    """Requests whose chosen vehicle was busy, served by another one."""
     queued: int = 0
-    """Requests that found no idle vehicle at all and waited for one."""
+    """Requests whose first answer was ``queued`` or ``partial`` (they waited in the queue)."""
+    partial: int = 0
+    """Answers that sent some of the required vehicles and not all."""
     failed: int = 0
-    """Requests SUMO refused to dispatch (none expected)."""
+    """Dispatches SUMO refused (the request went back to the head of the queue)."""
     park_retries: int = 0
     """Times SUMO could not send a vehicle home at once (it was tried again a step later)."""
     lost: list[str] = field(default_factory=list)
     """Fleet vehicles that left the simulation (never expected; counted, not fatal)."""
+    orphaned: list[str] = field(default_factory=list)
+    """Persons whose carrier left the simulation; asked for again at the head of the queue."""
+    dropped: list[str] = field(default_factory=list)
+    """Orphaned persons SUMO would not let another vehicle serve."""
     traffic_updates: int = 0
-    chosen: dict[str, str] = field(default_factory=dict)
-    """Person id -> the vehicle the service chose."""
+    state_batches: int = 0
+    """Batches of vehicle states sent to the service."""
+    state_changes: list[tuple[float, str, str]] = field(default_factory=list)
+    """``(time, vehicle, status)`` of every state change sent (positions left out)."""
+    named: dict[str, str] = field(default_factory=dict)
+    """Person id -> the vehicle the service's dispatch answer named to carry them."""
     dispatched: dict[str, str] = field(default_factory=dict)
-    """Person id -> the vehicle sent."""
+    """Person id -> the vehicle SUMO was told to send."""
+    from_queue: list[str] = field(default_factory=list)
+    """Persons served from the queue, in the order they were sent."""
     predicted: dict[str, float] = field(default_factory=dict)
-    """Person id -> the service's completion time ``T`` from the reference position."""
+    """Person id -> the service's travel time of the carrier from its current position."""
     snapshots: list[Snapshot] = field(default_factory=list)
 
 
@@ -82,7 +124,7 @@ def _position(data: Mapping[str, Any]) -> Position:
 
 
 class FleetDispatcher:
-    """Serve SUMO's taxi reservations with the vehicles the fleet service chooses.
+    """Serve SUMO's taxi reservations with the vehicles the fleet service dispatches.
 
     Parameters
     ----------
@@ -95,6 +137,12 @@ class FleetDispatcher:
     learn : bool
         ``True``: post each request as a target (SA update); ``False``: only
         ask who serves it (frozen reference positions).
+    edge_lengths : Mapping[str, float], optional
+        The service network's edges and their lengths: positions on other
+        edges (or on junctions) are not reported. ``None``: every edge, offsets
+        unclipped.
+    requires : sequence of str, optional
+        The vehicle types every request needs (``None``: any one vehicle).
     traffic_edges : Mapping[str, float], optional
         SUMO edge id -> free-flow travel time (s) of the edges to push live
         travel times for; ``None`` pushes nothing.
@@ -102,6 +150,8 @@ class FleetDispatcher:
         Seconds between two pushes of live travel times.
     snapshot_period : float
         Seconds between two records of the reference positions.
+    position_period : float
+        Seconds between two reports of the positions of available vehicles that drive.
     """
 
     def __init__(
@@ -111,28 +161,42 @@ class FleetDispatcher:
         fleet_id: str,
         *,
         learn: bool,
+        edge_lengths: Mapping[str, float] | None = None,
+        requires: Sequence[str] | None = None,
         traffic_edges: Mapping[str, float] | None = None,
         traffic_period: float = 60.0,
         snapshot_period: float = 300.0,
+        position_period: float = 30.0,
     ) -> None:
         self.backend = backend
         self.client = client
         self.fleet_id = fleet_id
         self.learn = learn
+        self.edge_lengths = dict(edge_lengths) if edge_lengths is not None else None
+        self.requires = tuple(requires) if requires else None
         self.traffic_edges = dict(traffic_edges) if traffic_edges is not None else None
         self.traffic_period = traffic_period
         self.snapshot_period = snapshot_period
-        fleet = client.get_fleet(fleet_id)
-        self.references: dict[str, Position] = {
-            str(v["id"]): _position(v["position"]) for v in fleet["vehicles"]
-        }
+        self.position_period = position_period
+        self.references: dict[str, Position] = {}
+        self._read_references()
         self.busy: set[str] = set()
+        self.escorts: dict[str, str] = {}
+        """Vehicle -> the carrier it accompanies (partial answers): released together."""
+        self.carrying: dict[str, Waiting] = {}
+        """Carrier -> the request it serves, until its drop-off."""
         self.gone: set[str] = set()
         self.homeless: set[str] = set()
-        self.queue: deque[Reservation] = deque()
+        self.reported: dict[str, Position] = {}
+        self.queue: deque[Waiting] = deque()
         self.log = DispatchLog()
+        self._staged: list[dict[str, Any]] = []
         self._next_traffic = 0.0
         self._next_snapshot = 0.0
+        self._next_positions = 0.0
+        self._retry = False
+
+    # -- the step -------------------------------------------------------------
 
     def on_step(self) -> None:
         """Do everything due after one simulation step."""
@@ -143,13 +207,43 @@ class FleetDispatcher:
         if now >= self._next_snapshot:
             self.log.snapshots.append(Snapshot(now, dict(self.references)))
             self._next_snapshot = now + self.snapshot_period
+        if self._release_finished() or self._retry:
+            self._retry = False
+            self._serve_queue()
         for reservation in self.backend.new_reservations():
             self._request(reservation)
-        self._release_finished()
+        self._send_home()
+        if now >= self._next_positions:
+            self._report_moving()
+            self._next_positions = now + self.position_period
+        self._flush()
 
     def finish(self) -> None:
-        """Record the final reference positions."""
+        """Send what is staged and record the final reference positions."""
+        self._flush()
         self.log.snapshots.append(Snapshot(self.backend.time(), dict(self.references)))
+
+    # -- the service ----------------------------------------------------------
+
+    def _stage(self, vehicle: str, status: str, *, position: Position | None = None) -> None:
+        change: dict[str, Any] = {
+            "vehicle": vehicle,
+            "status": status,
+            "timestamp": self.backend.time(),
+        }
+        if position is not None:
+            change["position"] = {"edge": position[0], "offset": position[1]}
+            self.reported[vehicle] = position
+        self._staged.append(change)
+        self.log.state_changes.append((self.backend.time(), vehicle, status))
+
+    def _flush(self) -> None:
+        """Send the staged state changes in one batch."""
+        if not self._staged:
+            return
+        changes, self._staged = self._staged, []
+        self.client.put_vehicle_states(self.fleet_id, changes)
+        self.log.state_batches += 1
 
     def _push_travel_times(self) -> None:
         assert self.traffic_edges is not None
@@ -163,94 +257,182 @@ class FleetDispatcher:
         self.client.put_traveltimes(self.fleet_id, times)
         self.log.traffic_updates += 1
 
-    def _request(self, reservation: Reservation) -> None:
+    def _read_references(self) -> None:
+        fleet = self.client.get_fleet(self.fleet_id)
+        moved = {
+            str(v["id"]): _position(v.get("reference") or v["position"]) for v in fleet["vehicles"]
+        }
+        self._update_references(moved)
+
+    def _update_references(self, moved: Mapping[str, Position]) -> None:
+        """New references; an idle vehicle whose reference moved drives to the new one."""
+        for vehicle, position in moved.items():
+            before = self.references.get(vehicle)
+            self.references[vehicle] = position
+            if before is not None and before != position and vehicle not in self.busy:
+                self.homeless.add(vehicle)
+
+    def _ask(self, reservation: Reservation, requires: Sequence[str] | None, *, learn: bool) -> Any:
+        """The service's answer for a request (after sending the staged states)."""
+        self._flush()
         position = {"edge": reservation.from_edge, "offset": reservation.from_pos}
-        if self.learn:
-            answer = self.client.post_target(self.fleet_id, position)
-            for moved_back in answer.get("backed_off", ()):
-                self.references[str(moved_back["vehicle"])] = _position(moved_back["position"])
-            self.references[str(answer["moved"])] = _position(answer["new_position"])
+        needs = list(requires) if requires else None
+        if not learn:
+            return self.client.assign(self.fleet_id, position, requires=needs)
+        answer = self.client.post_target(self.fleet_id, position, requires=needs)
+        if answer.get("consolidated"):
+            self._read_references()
         else:
-            answer = self.client.assign(self.fleet_id, position)
-        chosen = str(answer["served_by"][0])
+            moved = {str(b["vehicle"]): _position(b["position"]) for b in answer["backed_off"]}
+            moved[str(answer["moved"])] = _position(answer["new_position"])
+            self._update_references(moved)
+        return answer
+
+    # -- requests -------------------------------------------------------------
+
+    def _request(self, reservation: Reservation) -> None:
         self.log.requests += 1
-        self.log.chosen[reservation.person] = chosen
-        self.log.predicted[reservation.person] = float(answer["cost"])
-        if chosen not in self.busy and chosen not in self.gone:
-            self._send(chosen, reservation)
-            return
-        idle = self._idle()
-        if not idle:
+        answer = self._ask(reservation, self.requires, learn=self.learn)
+        waiting = Waiting(reservation, self.requires)
+        if not self._serve(waiting, answer["dispatch"]):
             self.log.queued += 1
-            self.queue.append(reservation)
-            return
-        self.log.fallbacks += 1
-        self._send(self._closest(idle, reservation), reservation)
+            self.queue.append(waiting)
 
-    def _closest(self, idle: Sequence[str], reservation: Reservation) -> str:
-        """The idle vehicle with the fastest route to the pick-up (ties: by id)."""
-        best, best_time = idle[0], math.inf
-        for vehicle in sorted(idle):
-            if self.backend.taxi_state(vehicle) == TAXI_GONE:
-                self._lose(vehicle)
-                continue
-            here = self.backend.current_edge(vehicle)
-            seconds = self.backend.route_time(here, reservation.from_edge, FLEET_TYPE)
-            if seconds < best_time:
-                best, best_time = vehicle, seconds
-        return best
+    def _serve_queue(self) -> None:
+        """Serve waiting requests, oldest first, while the service names vehicles for them."""
+        while self.queue:
+            waiting = self.queue[0]
+            answer = self._ask(waiting.reservation, waiting.requires, learn=False)
+            if answer["dispatch"]["status"] == "queued":
+                return
+            self.queue.popleft()
+            if not self._serve(waiting, answer["dispatch"]):
+                self.queue.appendleft(waiting)
+                return
+            self.log.from_queue.append(waiting.reservation.person)
 
-    def _send(self, vehicle: str, reservation: Reservation) -> None:
+    def _serve(self, waiting: Waiting, dispatch: Mapping[str, Any]) -> bool:
+        """Send the vehicles a dispatch answer names; whether the request is complete.
+
+        The first vehicle sent carries the customer (SUMO's ``dispatchTaxi``);
+        further vehicles drive to the pick-up and stay busy until the carrier
+        is done. What the answer leaves missing stays in ``waiting``.
+        """
+        sent = [str(v["vehicle"]) for v in dispatch["vehicles"]]
+        if dispatch["status"] == "partial":
+            self.log.partial += 1
+        person = waiting.reservation.person
+        for vehicle in sent:
+            if waiting.carrier is None:
+                if not self._dispatch(vehicle, waiting.reservation):
+                    if waiting.orphaned:  # SUMO no longer offers it (e.g. picked up)
+                        self.log.dropped.append(person)
+                        return True
+                    return False
+                waiting.carrier = vehicle
+                self.carrying[vehicle] = waiting
+                self.log.named[person] = vehicle
+                self.log.predicted[person] = float(dispatch["vehicles"][0]["cost"])
+            else:
+                self._escort(vehicle, waiting)
+        missing = tuple(str(t) for t in dispatch["missing"])
+        if missing and waiting.requires is not None:
+            waiting.requires = missing
+        return not missing
+
+    def _dispatch(self, vehicle: str, reservation: Reservation) -> bool:
+        """Tell SUMO to send ``vehicle``; report it busy. ``False`` if SUMO refused."""
         try:
             self.backend.dispatch(vehicle, reservation.id)
         except SimulationError:
-            if self.backend.taxi_state(vehicle) != TAXI_GONE:
-                self.log.failed += 1
-                return
-            self._lose(vehicle)
-            idle = self._idle()
-            if idle:
-                self._send(self._closest(idle, reservation), reservation)
+            if self.backend.taxi_state(vehicle) == TAXI_GONE:
+                self._lose(vehicle)
             else:
-                self.queue.appendleft(reservation)
-            return
+                self.log.failed += 1
+            self._retry = True
+            return False
         self.busy.add(vehicle)
+        self.homeless.discard(vehicle)
         self.log.dispatched[reservation.person] = vehicle
+        self._stage(vehicle, "busy")
+        return True
+
+    def _escort(self, vehicle: str, waiting: Waiting) -> None:
+        """Send a further required vehicle to the pick-up; it stays with the carrier."""
+        assert waiting.carrier is not None
+        reservation = waiting.reservation
+        self.busy.add(vehicle)
+        self.homeless.discard(vehicle)
+        self.escorts[vehicle] = waiting.carrier
+        self._stage(vehicle, "busy")
+        try:
+            self.backend.park_at(vehicle, reservation.from_edge, reservation.from_pos)
+        except SimulationError:
+            self.log.park_retries += 1
+
+    # -- vehicles -------------------------------------------------------------
 
     def _lose(self, vehicle: str) -> None:
-        """Forget a vehicle that has left the simulation."""
+        """Forget a vehicle that has left the simulation; tell the service it is offline."""
         if vehicle not in self.gone:
             self.gone.add(vehicle)
             self.log.lost.append(vehicle)
+            self._stage(vehicle, "offline")
         self.busy.discard(vehicle)
         self.homeless.discard(vehicle)
 
-    def _release_finished(self) -> None:
-        if not self.busy:
-            if self.homeless:
-                self._send_home()
-            return
-        states = {v: self.backend.taxi_state(v) for v in sorted(self.busy)}
+    def place(self, vehicle: str) -> Position | None:
+        """Where a vehicle is now, on the service's network (``None``: not on it now)."""
+        edge, offset = self.backend.vehicle_position(vehicle)
+        if self.edge_lengths is None:
+            return (edge, offset)
+        length = self.edge_lengths.get(edge)
+        if length is None:
+            return None
+        return (edge, min(max(offset, 0.0), length))
+
+    def _release_finished(self) -> bool:
+        """Report vehicles that finished their job as available; whether any did."""
+        carriers = sorted(v for v in self.busy if v not in self.escorts)
+        states = {v: self.backend.taxi_state(v) for v in carriers}
+        done = []
+        lost = []
         for vehicle, state in states.items():
             if state == TAXI_GONE:
                 self._lose(vehicle)
-        done = [v for v, state in states.items() if state == TAXI_IDLE]
+                lost.append(vehicle)
+            elif state == TAXI_IDLE:
+                done.append(vehicle)
+        for vehicle in lost:
+            orphan = self.carrying.pop(vehicle, None)
+            if orphan is not None:
+                orphan.carrier, orphan.orphaned = None, True
+                self.queue.appendleft(orphan)
+                self.log.orphaned.append(orphan.reservation.person)
+                self._retry = True
+        done += sorted(e for e, carrier in self.escorts.items() if carrier in done + lost)
         for vehicle in done:
             self.busy.discard(vehicle)
-        while self.queue and self._idle():
-            reservation = self.queue.popleft()
-            chosen = self.log.chosen[reservation.person]
-            idle = self._idle()
-            vehicle = chosen if chosen in idle else self._closest(idle, reservation)
-            if vehicle != chosen:
-                self.log.fallbacks += 1
-            self._send(vehicle, reservation)
-        self.homeless.update(v for v in done if v not in self.busy)
-        self._send_home()
+            self.escorts.pop(vehicle, None)
+            self.carrying.pop(vehicle, None)
+            self._stage(vehicle, "available", position=self.place(vehicle))
+            self.homeless.add(vehicle)
+        return bool(done)
 
-    def _idle(self) -> list[str]:
-        """Vehicles that are neither busy nor gone, by id."""
-        return [v for v in sorted(self.references) if v not in self.busy and v not in self.gone]
+    def _report_moving(self) -> None:
+        """Report the positions of available vehicles that moved since their last report."""
+        for vehicle in sorted(self.references):
+            if vehicle in self.busy or vehicle in self.gone:
+                continue
+            if self.backend.taxi_state(vehicle) == TAXI_GONE:
+                self._lose(vehicle)
+                continue
+            here = self.place(vehicle)
+            last = self.reported.get(vehicle)
+            if here is None or last is None:
+                continue
+            if here[0] != last[0] or abs(here[1] - last[1]) > POSITION_TOLERANCE:
+                self._stage(vehicle, "available", position=here)
 
     def _send_home(self) -> None:
         """Send idle vehicles that have not been sent home yet to their reference."""
@@ -267,3 +449,7 @@ class FleetDispatcher:
             except SimulationError:
                 self.log.park_retries += 1
                 self.homeless.add(vehicle)
+                continue
+            here = self.place(vehicle)
+            if here is not None and self.reported.get(vehicle) != here:
+                self._stage(vehicle, "available", position=here)

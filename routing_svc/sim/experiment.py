@@ -62,7 +62,11 @@ class CosimResult:
         for name, runs in self.by_policy().items():
             rows = [r.summary() for r in sorted(runs, key=lambda r: r.seed)]
             keys = [k for k, v in rows[0].items() if isinstance(v, int | float) and k != "seed"]
-            mean = {k: float(np.nanmean([row[k] for row in rows])) for k in keys}
+            mean: dict[str, Any] = {k: float(np.nanmean([row[k] for row in rows])) for k in keys}
+            mean["within"] = {
+                limit: float(np.nanmean([row["within"][limit] for row in rows]))
+                for limit in rows[0]["within"]
+            }
             curves = [self.curves[(name, r.seed)] for r in runs if (name, r.seed) in self.curves]
             if curves:
                 mean["final_expected_wait_s"] = float(np.mean([c[-1][1] for c in curves]))
@@ -109,6 +113,7 @@ def _jobs(spec: CosimSpec, prepared: Prepared, *, progress: bool, resume: bool) 
                     vehicles=positions,
                     end=spec.end,
                     measure_from=spec.warmup,
+                    request_end=spec.warmup + spec.duration,
                     cost=spec.cost,
                     step=step,
                     history=tuple((r.edge, r.offset) for r in history),

@@ -110,6 +110,9 @@ class FakeBackend:
     def lane_position(self, vehicle: str) -> float:
         return 0.0
 
+    def vehicle_position(self, vehicle: str) -> tuple[str, float]:
+        return self._edges[vehicle], 0.0
+
     def route_time(self, from_edge: str, to_edge: str, vtype: str) -> float:
         return self.route_time_of(from_edge, to_edge)
 

@@ -29,10 +29,17 @@ __all__ = [
     "sumo_options",
     "write_fleet",
     "write_persons",
+    "write_taxi_stands",
 ]
 
 #: SUMO vType id of the fleet's vehicles.
 FLEET_TYPE = "fleet"
+
+#: Id of the rerouter that lists the taxi stands (SUMO idle algorithm ``taxistand``).
+STANDS_REROUTER = "taxi_stands"
+
+#: Length (m) of a taxi stand's parking area along its lane.
+STAND_LENGTH = 20.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -140,6 +147,7 @@ def write_fleet(
     *,
     lengths: dict[str, float],
     park: bool,
+    stands: bool = False,
 ) -> Path:
     """The fleet's vType and vehicles, inserted at ``t = 0`` at their positions.
 
@@ -154,28 +162,117 @@ def write_fleet(
     park : bool
         Whether each vehicle parks at its insertion position (the co-simulation
         dispatches it; SUMO's own idle algorithm is used otherwise).
+    stands : bool
+        Whether idle taxis use the stands of :func:`write_taxi_stands` (SUMO's
+        ``taxistand`` idle algorithm), choosing the closest one; vehicle ``k``
+        starts parked at stand ``k`` (SUMO cannot send a taxi inserted on a
+        stand to that stand).
     """
     lines = [
         "<routes>",
         f'    <vType id="{FLEET_TYPE}" vClass="passenger" color="0,160,255">',
         '        <param key="has.taxi.device" value="true"/>',
-        "    </vType>",
     ]
-    for v in vehicles:
+    if stands:
+        lines += [
+            f'        <param key="device.taxi.stands-rerouter" value="{STANDS_REROUTER}"/>',
+            '        <param key="parking.ignoreDest" value="1"/>',
+        ]
+    lines.append("    </vType>")
+    for number, v in enumerate(vehicles):
         pos = _stop_offset(v.offset, lengths[v.edge])
         edge = quoteattr(v.edge)
+        depart = _stand_span(v.offset, lengths[v.edge])[0] if stands else max(pos - 1.0, 0.0)
         lines.append(
             f'    <vehicle id={quoteattr(v.id)} type="{FLEET_TYPE}" depart="0" '
-            f'departPos="{max(pos - 1.0, 0.0):.2f}" line="taxi">'
+            f'departPos="{depart:.2f}" line="taxi">'
         )
         lines.append(f"        <route edges={edge}/>")
-        if park:
+        if stands:
+            lines.append(
+                f'        <stop parkingArea="{_stand_id(number)}" duration="{PARK_SECONDS:g}"/>'
+            )
+        elif park:
             lines.append(
                 f'        <stop edge={edge} endPos="{pos:.2f}" duration="{PARK_SECONDS:g}" '
                 'parking="true"/>'
             )
         lines.append("    </vehicle>")
     lines.append("</routes>")
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def passenger_lanes(net: Path, edges: Sequence[str]) -> dict[str, int]:
+    """The rightmost lane index of each edge that passenger cars may use (0 if none says)."""
+    import gzip
+
+    from defusedxml import ElementTree
+
+    wanted = set(edges)
+    found: dict[str, int] = {}
+    opener = gzip.open if net.name.endswith(".gz") else open
+    with opener(net, "rb") as stream:
+        for _, element in ElementTree.iterparse(stream, events=("end",)):
+            if element.tag != "edge":
+                continue
+            edge = element.get("id", "")
+            if edge in wanted:
+                found[edge] = 0
+                for lane in sorted(element.iter("lane"), key=lambda x: int(x.get("index", "0"))):
+                    allow = lane.get("allow")
+                    disallow = (lane.get("disallow") or "").split()
+                    if (allow is None or "passenger" in allow.split()) and (
+                        "passenger" not in disallow
+                    ):
+                        found[edge] = int(lane.get("index", "0"))
+                        break
+            element.clear()
+    return found
+
+
+def _stand_id(number: int) -> str:
+    return f"stand{number:03d}"
+
+
+def _stand_span(offset: float, length: float) -> tuple[float, float]:
+    """Where a stand around ``offset`` begins and ends on a lane of ``length`` metres."""
+    start = min(max(offset - STAND_LENGTH / 2.0, 0.0), max(length - STAND_LENGTH, 0.0))
+    return start, min(start + STAND_LENGTH, length)
+
+
+def write_taxi_stands(
+    path: Path,
+    sites: Sequence[FleetVehicle],
+    *,
+    lengths: dict[str, float],
+    lanes: dict[str, int],
+    capacity: int,
+) -> Path:
+    """Taxi stands for SUMO's ``taxistand`` idle algorithm, one per site.
+
+    Each stand is a ``parkingArea`` of :data:`STAND_LENGTH` metres around the
+    site on the edge's passenger lane, with room for ``capacity`` taxis; the
+    rerouter :data:`STANDS_REROUTER` lists them (SUMO's taxi device reads the
+    stands from it; with ``parking.ignoreDest`` an idle taxi picks the
+    closest).
+    """
+    lines = ["<additional>"]
+    stand_ids = []
+    for number, site in enumerate(sites):
+        start, end = _stand_span(site.offset, lengths[site.edge])
+        stand = _stand_id(number)
+        stand_ids.append(stand)
+        lane = quoteattr(f"{site.edge}_{lanes.get(site.edge, 0)}")
+        lines.append(
+            f'    <parkingArea id="{stand}" lane={lane} startPos="{start:.2f}" '
+            f'endPos="{end:.2f}" roadsideCapacity="{capacity}" friendlyPos="true"/>'
+        )
+    edges = quoteattr(" ".join(dict.fromkeys(s.edge for s in sites)))
+    lines.append(f'    <rerouter id="{STANDS_REROUTER}" edges={edges}>')
+    lines.append('        <interval begin="0" end="1e9">')
+    lines += [f'            <parkingAreaReroute id="{stand}"/>' for stand in stand_ids]
+    lines += ["        </interval>", "    </rerouter>", "</additional>"]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path
 
@@ -206,6 +303,7 @@ def sumo_options(
     tripinfo: Path,
     dispatch: str,
     idle: str = "stop",
+    additional: Sequence[Path] = (),
 ) -> list[str]:
     """SUMO's command line (without the binary) for one co-simulation run.
 
@@ -214,10 +312,14 @@ def sumo_options(
     dispatch : {"traci", "greedy"}
         ``traci``: the co-simulation dispatches; ``greedy``: SUMO's taxi device
         does, every second.
-    idle : {"stop", "randomCircling"}
+    idle : {"stop", "randomCircling", "taxistand"}
         What SUMO's taxi device does with an idle taxi.
+    additional : sequence of Path
+        SUMO additional files (e.g. the taxi stands).
     """
+    extra = ["--additional-files", ",".join(str(a) for a in additional)] if additional else []
     return [
+        *extra,
         "--net-file",
         str(net),
         "--route-files",

@@ -27,12 +27,14 @@ __all__ = ["plot_objective", "plot_positions", "plot_waits", "write_figures"]
 
 _COLOURS = {
     "sa": "tab:blue",
+    "sa-available": "tab:olive",
     "sa-floor": "tab:cyan",
     "sa-cold": "tab:purple",
     "static": "tab:gray",
     "optimum": "tab:green",
     "sumo-stop": "tab:red",
     "sumo-circling": "tab:orange",
+    "sumo-taxistand": "tab:brown",
 }
 BIN_SECONDS = 600.0
 

@@ -1,23 +1,31 @@
 """The policies a co-simulation compares, all on identical demand.
 
 ==================  ==========================================================
-``sa``              this product: the service chooses the vehicle whose
-                    reference position is closest and moves it (SA update);
-                    starting at the p-median of the historical requests, if
-                    any (the paper's deterministic first configuration).
+``sa``              this product: the service dispatches the closest
+                    available vehicle by its current position, and the
+                    closest reference moves, busy or not (the paper's rule,
+                    fleet option ``learning_vehicles=all``); starting at the
+                    p-median of the historical requests, if any (the paper's
+                    deterministic first configuration).
+``sa-available``    ``sa`` with ``learning_vehicles=available``: the closest
+                    reference among the available vehicles moves.
 ``sa-cold``         the same without history: it starts at the start
                     positions and learning starts with the run.
 ``sa-floor``        ``sa`` with a floored, asymptotically constant step
                     (for tracking demand that moves).
-``static``          the service chooses, reference positions frozen at the
+``static``          the service dispatches, reference positions frozen at the
                     start positions (``assign`` only).
-``optimum``         the service chooses, reference positions frozen at the
+``optimum``         the service dispatches, reference positions frozen at the
                     (best-known) p-median of the true demand distribution; for
                     incidents, of the realised requests (hindsight).
 ``sumo-stop``       SUMO's taxi device: ``greedy`` dispatch, idle taxis stop
                     where they are.
 ``sumo-circling``   SUMO's taxi device: ``greedy`` dispatch, idle taxis drive
                     around at random (``randomCircling``).
+``sumo-taxistand``  SUMO's taxi device: ``greedy`` dispatch, idle taxis drive
+                    to the closest taxi stand (``taxistand``); the stands are
+                    parking areas at the ``optimum`` policy's sites, where the
+                    taxis also start.
 ==================  ==========================================================
 """
 
@@ -54,6 +62,8 @@ class Policy:
         Whether the SA step has a floor (tracking).
     history : bool
         Whether the fleet starts at the p-median of the historical requests.
+    learning_vehicles : {"all", "available"}
+        The fleet's ``learning_vehicles`` option (whose reference learns).
     """
 
     name: str
@@ -63,23 +73,26 @@ class Policy:
     idle: str = "stop"
     floor: bool = False
     history: bool = False
+    learning_vehicles: Literal["all", "available"] = "all"
 
 
 POLICIES: dict[str, Policy] = {
     p.name: p
     for p in (
         Policy("sa", "service", learn=True, history=True),
+        Policy("sa-available", "service", learn=True, history=True, learning_vehicles="available"),
         Policy("sa-cold", "service", learn=True),
         Policy("sa-floor", "service", learn=True, floor=True, history=True),
         Policy("static", "service"),
         Policy("optimum", "service", positions="optimum"),
         Policy("sumo-stop", "sumo", idle="stop"),
         Policy("sumo-circling", "sumo", idle="randomCircling"),
+        Policy("sumo-taxistand", "sumo", idle="taxistand", positions="optimum"),
     )
 }
 """Every known policy by name."""
 
-DEFAULT_POLICIES = ("sa", "static", "optimum", "sumo-stop", "sumo-circling")
+DEFAULT_POLICIES = ("sa", "sa-available", "optimum", "sumo-stop", "sumo-taxistand")
 
 #: The floored step's minimum as a fraction of the default step's ``a``.
 FLOOR_FRACTION = 0.125

@@ -2,11 +2,13 @@
 
 :func:`run_policy` is a plain function of a picklable :class:`PolicyJob`, so
 several runs go to a process pool (libsumo allows one simulation per
-process). Policies that the service dispatches (``sa``, ``sa-floor``,
-``static``, ``optimum``) run with SUMO's ``traci`` dispatch algorithm and a
-:class:`~routing_svc.sim.dispatcher.FleetDispatcher`; SUMO's own policies run
-with its ``greedy`` dispatcher and nothing in the loop. Either way every wait
-is read from SUMO's tripinfo output afterwards.
+process). Policies that the service dispatches (``sa``, ``sa-available``,
+``sa-floor``, ``static``, ``optimum``) run with SUMO's ``traci`` dispatch
+algorithm and a :class:`~routing_svc.sim.dispatcher.FleetDispatcher`; SUMO's
+own policies run with its ``greedy`` dispatcher and nothing in the loop
+(``sumo-taxistand`` with taxi stands at its start sites). Either way every
+wait is read from SUMO's tripinfo output afterwards, and the fleet's load is
+sampled from SUMO's taxi states (:class:`~routing_svc.sim.measures.FleetLoad`).
 """
 
 from __future__ import annotations
@@ -29,8 +31,14 @@ from typing import Any, TypeVar
 from routing_svc.client import FleetClient, HttpFleetClient
 from routing_svc.sim.backend import SimulationError, make_backend
 from routing_svc.sim.dispatcher import FleetDispatcher
-from routing_svc.sim.inputs import FleetVehicle, sumo_options, write_fleet
-from routing_svc.sim.measures import PolicyRun, read_tripinfo
+from routing_svc.sim.inputs import (
+    FleetVehicle,
+    passenger_lanes,
+    sumo_options,
+    write_fleet,
+    write_taxi_stands,
+)
+from routing_svc.sim.measures import FleetLoad, PolicyRun, read_tripinfo
 from routing_svc.sim.policies import Policy
 
 __all__ = [
@@ -71,6 +79,9 @@ class PolicyJob:
         Simulated seconds to run.
     measure_from : float
         Requests before this time are not counted in the mean waits.
+    request_end : float, optional
+        The end of the request period (``None``: ``end``); the load is
+        measured in ``[measure_from, request_end)``.
     cost : str
         Fleet cost ``time`` or ``length``.
     step : Mapping, optional
@@ -104,6 +115,7 @@ class PolicyJob:
     vehicles: tuple[FleetVehicle, ...]
     end: float
     measure_from: float = 0.0
+    request_end: float | None = None
     cost: str = "time"
     step: Mapping[str, Any] | None = None
     history: tuple[tuple[str, float], ...] = ()
@@ -184,6 +196,7 @@ def _fleet_spec(job: PolicyJob, network_id: str, fleet_id: str) -> dict[str, Any
         "objective": "routing",
         "step": dict(job.step) if job.step is not None else None,
         "seed": job.seed,
+        "learning_vehicles": job.policy.learning_vehicles,
     }
     if job.rule is not None:
         spec["rule"] = job.rule
@@ -249,10 +262,26 @@ def run_policy(job: PolicyJob) -> PolicyRun:
             network_id = str(client.add_network(job.net, name=_network_id(job.net))["id"])
             client.create_fleet(_fleet_spec(job, network_id, fleet_id))
             vehicles = _inserted_at_references(client.get_fleet(fleet_id), job.vehicles)
-        lengths = _edge_lengths(job.net, [v.edge for v in vehicles])
+        lengths = _edge_lengths(job.net)
+        stands = job.policy.idle == "taxistand"
         fleet_file = write_fleet(
-            job.workdir / f"fleet-{name}.rou.xml", vehicles, lengths=lengths, park=by_service
+            job.workdir / f"fleet-{name}.rou.xml",
+            vehicles,
+            lengths=lengths,
+            park=by_service,
+            stands=stands,
         )
+        additional = []
+        if stands:
+            additional.append(
+                write_taxi_stands(
+                    job.workdir / f"stands-{name}.add.xml",
+                    vehicles,
+                    lengths=lengths,
+                    lanes=passenger_lanes(job.net, [v.edge for v in vehicles]),
+                    capacity=len(vehicles),
+                )
+            )
         options = sumo_options(
             net=job.net,
             routes=[*job.routes, fleet_file],
@@ -261,14 +290,18 @@ def run_policy(job: PolicyJob) -> PolicyRun:
             tripinfo=tripinfo,
             dispatch="traci" if by_service else "greedy",
             idle=job.policy.idle,
+            additional=additional,
         )
         backend.start(options)
+        request_end = job.end if job.request_end is None else job.request_end
+        load = FleetLoad([v.id for v in vehicles], since=job.measure_from, until=request_end)
         if client is not None:
             dispatcher = FleetDispatcher(
                 backend,
                 client,
                 fleet_id,
                 learn=job.policy.learn,
+                edge_lengths=lengths,
                 traffic_edges=_free_flow_times(job.net) if job.traffic_period else None,
                 traffic_period=job.traffic_period or 60.0,
                 snapshot_period=job.snapshot_period,
@@ -278,6 +311,7 @@ def run_policy(job: PolicyJob) -> PolicyRun:
             backend.step()
             if dispatcher is not None:
                 dispatcher.on_step()
+            load.sample(backend)
             return backend.time()
 
         wall = _loop(job, step_once)
@@ -293,7 +327,7 @@ def run_policy(job: PolicyJob) -> PolicyRun:
             with contextlib.suppress(Exception):  # best effort, e.g. on a server we do not own
                 client.delete_fleet(fleet_id)
             _close(client)
-    return _result(job, tripinfo, dispatcher, wall)
+    return _result(job, tripinfo, dispatcher, wall, load)
 
 
 def _inserted_at_references(
@@ -315,18 +349,24 @@ def _inserted_at_references(
     )
 
 
-def _edge_lengths(net: Path, edges: Sequence[str]) -> dict[str, float]:
+def _edge_lengths(net: Path) -> dict[str, float]:
+    """Every edge of the network as the service sees it, and its length (m)."""
     from routing_svc.network import load_network
 
     network = load_network(net)
-    return {e: float(network.length[network.edge_index[e]]) for e in edges}
+    return {e: float(network.length[i]) for i, e in enumerate(network.edge_ids)}
 
 
 def _result(
-    job: PolicyJob, tripinfo: Path, dispatcher: FleetDispatcher | None, wall: float
+    job: PolicyJob,
+    tripinfo: Path,
+    dispatcher: FleetDispatcher | None,
+    wall: float,
+    load: FleetLoad,
 ) -> PolicyRun:
     measures = read_tripinfo(tripinfo, fleet_prefix=FLEET_PREFIX)
-    requested = [r for r in measures.rides if r.requested >= job.measure_from]
+    request_end = job.end if job.request_end is None else job.request_end
+    requested = [r for r in measures.rides if job.measure_from <= r.requested < request_end]
     last = max((r.requested for r in requested), default=job.measure_from)
     half = job.measure_from + (last - job.measure_from) / 2.0
     log = dispatcher.log if dispatcher is not None else None
@@ -339,12 +379,17 @@ def _result(
         mean_wait_second_half=measures.mean_wait(since=half),
         empty_km=measures.empty_km,
         driven_km=measures.driven_km,
-        fallbacks=log.fallbacks if log else 0,
+        fallbacks=sum(1 for p, v in log.dispatched.items() if log.named.get(p) != v) if log else 0,
         queued=log.queued if log else 0,
         failed=log.failed if log else 0,
         sim_seconds=job.end,
         wall_seconds=wall,
         tripinfo=str(tripinfo),
+        measure_from=job.measure_from,
+        vehicles=len(job.vehicles),
+        request_hours=(request_end - job.measure_from) / 3600.0,
+        busy_fraction=load.busy_fraction,
+        state_batches=log.state_batches if log else 0,
         traffic_updates=log.traffic_updates if log else 0,
         park_retries=log.park_retries if log else 0,
         lost=sum(1 for f in measures.fleet if f.left),
@@ -352,7 +397,7 @@ def _result(
         predicted=[
             (
                 log.predicted.get(r.person, math.nan),
-                log.dispatched.get(r.person) != log.chosen.get(r.person),
+                log.dispatched.get(r.person) != log.named.get(r.person),
             )
             for r in measures.rides
         ]

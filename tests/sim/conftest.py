@@ -21,7 +21,7 @@ import pytest
 from routing_svc.network.catalogue import resolve_network
 from routing_svc.sim import CosimResult, CosimSpec, parse_policies, run_cosim
 
-ALL_POLICIES = "sa,sa-cold,static,optimum,sumo-stop,sumo-circling"
+ALL_POLICIES = "sa,sa-available,sa-cold,static,optimum,sumo-stop,sumo-circling,sumo-taxistand"
 
 
 @pytest.fixture(scope="session")

@@ -46,31 +46,42 @@ def _run(backend: FakeBackend, dispatcher: FleetDispatcher, seconds: int) -> Non
         dispatcher.on_step()
 
 
-def test_busy_choice_falls_back_to_the_closest_idle_vehicle(client: InProcessFleetClient) -> None:
+def _statuses(client: InProcessFleetClient) -> dict[str, str]:
+    return {str(v["id"]): str(v["status"]) for v in client.get_fleet("f")["vehicles"]}
+
+
+def test_the_service_names_the_available_vehicle_and_sees_it_busy(
+    client: InProcessFleetClient,
+) -> None:
     backend = FakeBackend(
         positions={"v0": "A0A1", "v1": "F5F4"},
         reservations=[_reservation(1, 1.0, "A1A2"), _reservation(2, 2.0, "A1A2")],
     )
     dispatcher = FleetDispatcher(backend, client, "f", learn=False)
     _run(backend, dispatcher, 5)
+    # v0 is closest to both; busy with p1, so the service names v1 for p2
     assert [(d.vehicle, d.reservation) for d in backend.dispatches] == [("v0", "r1"), ("v1", "r2")]
-    assert dispatcher.log.chosen == {"p1": "v0", "p2": "v0"}
-    assert (dispatcher.log.fallbacks, dispatcher.log.queued) == (1, 0)
+    assert dispatcher.log.named == dispatcher.log.dispatched == {"p1": "v0", "p2": "v1"}
+    assert _statuses(client) == {"v0": "busy", "v1": "busy"}
+    assert dispatcher.log.queued == 0
 
 
-def test_requests_wait_for_the_next_idle_vehicle_then_vehicles_go_home(
+def test_queued_requests_are_served_first_in_order_then_vehicles_go_home(
     client: InProcessFleetClient,
 ) -> None:
-    reservations = [_reservation(i, float(i), "A1A2") for i in (1, 2, 3)]
+    reservations = [_reservation(i, float(i), "A1A2") for i in (1, 2, 3, 4)]
     backend = FakeBackend(
         positions={"v0": "A0A1", "v1": "F5F4"}, reservations=reservations, service_seconds=100.0
     )
     dispatcher = FleetDispatcher(backend, client, "f", learn=False)
-    _run(backend, dispatcher, 300)
-    assert [(d.time, d.vehicle) for d in backend.dispatches] == [(1, "v0"), (2, "v1"), (101, "v0")]
-    assert (dispatcher.log.queued, dispatcher.log.fallbacks) == (1, 1)
+    _run(backend, dispatcher, 400)
+    sent = [(d.time, d.vehicle, d.reservation) for d in backend.dispatches]
+    assert sent == [(1, "v0", "r1"), (2, "v1", "r2"), (101, "v0", "r3"), (102, "v1", "r4")]
+    assert dispatcher.log.queued == 2 and dispatcher.log.from_queue == ["p3", "p4"]
     homes = [(t, v, e) for t, v, e, _ in backend.parked]
-    assert homes == [(102, "v1", "F5F4"), (201, "v0", "A0A1")]
+    assert homes == [(201, "v0", "A0A1"), (202, "v1", "F5F4")]
+    assert _statuses(client) == {"v0": "available", "v1": "available"}
+    assert ("v0", "busy") in [(v, s) for _, v, s in dispatcher.log.state_changes]
 
 
 def test_sa_updates_move_the_reference_the_vehicle_returns_to(
@@ -100,7 +111,7 @@ def test_live_travel_times_are_pushed_every_period(client: InProcessFleetClient)
     assert backend.pushes == dispatcher.log.traffic_updates == 4
 
 
-def test_a_vehicle_that_leaves_the_simulation_is_counted_and_replaced(
+def test_a_vehicle_that_leaves_the_simulation_is_reported_offline(
     client: InProcessFleetClient,
 ) -> None:
     reservations = [_reservation(1, 1.0, "A1A2"), _reservation(2, 50.0, "A1A2")]
@@ -114,7 +125,9 @@ def test_a_vehicle_that_leaves_the_simulation_is_counted_and_replaced(
         if second == 10:
             backend.vanish("v0")  # while busy with r1
         dispatcher.on_step()
-    assert [(d.vehicle, d.reservation) for d in backend.dispatches] == [("v0", "r1"), ("v1", "r2")]
-    assert dispatcher.log.lost == ["v0"]
-    assert dispatcher.log.chosen["p2"] == "v0" and dispatcher.log.fallbacks == 1
-    assert [v for _, v, _, _ in backend.parked] == ["v1"]
+    sent = [(d.time, d.vehicle, d.reservation) for d in backend.dispatches]
+    # r1's carrier left before the drop-off: r1 is asked for again and v1 serves it
+    assert sent == [(1, "v0", "r1"), (10, "v1", "r1"), (50, "v1", "r2")]
+    assert dispatcher.log.lost == ["v0"] and dispatcher.log.orphaned == ["p1"]
+    assert _statuses(client) == {"v0": "offline", "v1": "available"}
+    assert [v for _, v, _, _ in backend.parked] == ["v1", "v1"]

@@ -10,7 +10,8 @@ from defusedxml import ElementTree
 
 from routing_svc.sim import CosimResult
 
-SERVICE_POLICIES = ("sa", "sa-cold", "static", "optimum")
+SERVICE_POLICIES = ("sa", "sa-available", "sa-cold", "static", "optimum")
+SUMO_POLICIES = ("sumo-stop", "sumo-circling", "sumo-taxistand")
 
 
 def _sumo_waits(tripinfo: Path) -> dict[str, tuple[float, str]]:
@@ -26,7 +27,7 @@ def _sumo_waits(tripinfo: Path) -> dict[str, tuple[float, str]]:
 
 def test_every_policy_serves_the_requests(persons_result: CosimResult) -> None:
     runs = persons_result.by_policy()
-    assert set(runs) == {*SERVICE_POLICIES, "sumo-stop", "sumo-circling"}
+    assert set(runs) == {*SERVICE_POLICIES, *SUMO_POLICIES}
     for name, (run,) in runs.items():
         assert run.requests >= 8, name
         assert run.served >= run.requests - 1, name  # at most the last one still waiting
@@ -51,15 +52,27 @@ def test_waits_are_sumos_personinfo(persons_result: CosimResult) -> None:
         assert fleet and all(v.startswith("fleet") for v in fleet)
 
 
-def test_service_policies_dispatch_the_chosen_vehicle_unless_busy(
+def test_service_policies_send_the_vehicle_the_service_dispatched(
     persons_result: CosimResult,
 ) -> None:
     for name in SERVICE_POLICIES:
         (run,) = persons_result.by_policy()[name]
         assert len(run.predicted) == len(run.waits)
-        fallbacks = sum(1 for _, other in run.predicted if other)
-        assert fallbacks == run.fallbacks <= run.requests
-        assert all(math.isfinite(t) and t >= 0.0 for t, _ in run.predicted)
+        assert run.fallbacks == 0 and not any(other for _, other in run.predicted), name
+        served = [t for (t, _), (_, _, ok) in zip(run.predicted, run.waits, strict=True) if ok]
+        assert all(math.isfinite(t) and t >= 0.0 for t in served), name
+        assert run.state_batches > 0, name
+
+
+def test_service_levels_and_load_of_every_policy(persons_result: CosimResult) -> None:
+    for name, (run,) in persons_result.by_policy().items():
+        summary = run.summary()
+        assert summary["p50_wait_s"] <= summary["p90_wait_s"] <= summary["p95_wait_s"], name
+        within = list(summary["within"].values())
+        assert list(summary["within"]) == ["300", "600", "900"]
+        assert within == sorted(within) and 0.0 <= within[0] <= within[-1] <= 1.0, name
+        assert 0.0 < summary["busy_fraction"] < 1.0, name
+        assert summary["requests_per_vehicle_hour"] == run.requests / (4 * 900.0 / 3600.0)
 
 
 def test_sa_moves_reference_positions_and_frozen_policies_do_not(
@@ -123,6 +136,6 @@ def test_summary_json_is_written(persons_result: CosimResult, tmp_path: Path) ->
     summary = json.loads((out / "summary.json").read_text())
     assert set(summary["policies"]) == set(persons_result.by_policy())
     sa = summary["policies"]["sa"]
-    for key in ("mean_wait_s", "served", "empty_km", "fallbacks", "sim_speed"):
+    for key in ("mean_wait_s", "p90_wait_s", "within", "busy_fraction", "empty_km", "sim_speed"):
         assert key in sa
     assert summary["spec"]["mode"] == "persons"
