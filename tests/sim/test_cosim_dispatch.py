@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 from defusedxml import ElementTree
 
-from routing_svc.nets import resolve_network
 from routing_svc.network import load_network
+from routing_svc.network.catalogue import resolve_network
 from routing_svc.service.inprocess import InProcessFleetClient
 from routing_svc.sim.backend import TAXI_GONE, TAXI_IDLE, LibsumoBackend
 from routing_svc.sim.dispatcher import FleetDispatcher
