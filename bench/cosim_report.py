@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from routing_svc.sim import CosimResult, CosimSpec, PolicyRun, parse_policies, run_cosim
+from routing_svc.sim.command import parse_seeds
 from routing_svc.sim.measures import DEFAULT_THRESHOLDS
 from routing_svc.sim.plots import write_figures
 
@@ -457,16 +458,6 @@ def _saved_runs(out_dir: Path) -> tuple[dict[str, Any], list[PolicyRun]] | None:
     )
 
 
-def _seeds(text: str) -> tuple[int, ...]:
-    try:
-        seeds = tuple(int(s) for s in text.split(",") if s.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"seeds must be integers, got {text!r}") from None
-    if not seeds or any(s < 0 for s in seeds):
-        raise argparse.ArgumentTypeError("give at least one seed >= 0")
-    return seeds
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -475,7 +466,7 @@ def main(argv: list[str] | None = None) -> int:
         "--workdir", type=Path, default=Path.home() / ".cache" / "routing_svc" / "cosim-report"
     )
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--seeds", type=_seeds, default=(0, 1, 2), help="comma list of seeds")
+    parser.add_argument("--seeds", type=parse_seeds, default=(0, 1, 2), help="comma list of seeds")
     parser.add_argument("--hours", type=float, default=2.0)
     parser.add_argument("--rate", type=float, default=40.0, help="requests per hour")
     parser.add_argument("--history", type=int, default=1000)

@@ -25,10 +25,11 @@ from typing import Any
 
 from routing_svc.errors import InvalidInput
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "parse_seeds", "run"]
 
 
-def _seeds(text: str) -> tuple[int, ...]:
+def parse_seeds(text: str) -> tuple[int, ...]:
+    """``--seeds``: a comma list of integers >= 0."""
     try:
         seeds = tuple(int(s) for s in text.split(",") if s.strip())
     except ValueError:
@@ -83,7 +84,7 @@ def add_parser(subparsers: Any) -> None:
         help="comma list (default: sa,sa-available,optimum,sumo-stop,sumo-taxistand; "
         "also sa-cold, sa-floor, static, sumo-circling)",
     )
-    p.add_argument("--seeds", type=_seeds, default=(0,), help="comma list of seeds")
+    p.add_argument("--seeds", type=parse_seeds, default=(0,), help="comma list of seeds")
     p.add_argument("--workers", type=int, default=2, help="parallel SUMO processes")
     p.add_argument("--service-url", default=None, help="a running service (default: in-process)")
     p.add_argument("--backend", choices=["libsumo", "traci"], default="libsumo")
