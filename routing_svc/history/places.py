@@ -152,9 +152,7 @@ def place_remotely(
     client.get_fleet(fleet_id)
     bad = list(table.bad)
     answers: dict[tuple[object, ...], tuple[str, float] | str] = {}
-    rows: list[int] = []
-    edges: list[str] = []
-    offsets: list[float] = []
+    found: list[tuple[str, float] | str] = []
     for row in tqdm(range(len(table)), disable=not progress, file=sys.stderr, unit="call"):
         place = table.place(row)
         needs = table.requires[row]
@@ -165,15 +163,8 @@ def place_remotely(
                 answers[key] = (str(answer["target"]["edge"]), float(answer["target"]["offset"]))
             except (InvalidInput, NotFound) as exc:  # the fleet exists: the row is bad
                 answers[key] = exc.detail
-        found = answers[key]
-        if isinstance(found, str):
-            bad.append(BadRow(int(table.lines[row]), found))
-            continue
-        rows.append(row)
-        edges.append(found[0])
-        offsets.append(found[1])
-    bad.sort(key=lambda r: r.line)
-    return PlacedCalls(np.asarray(rows, dtype=np.int64), edges, offsets, bad)
+        found.append(answers[key])
+    return _placed(table, found, bad)
 
 
 class PositionResolver(Protocol):
@@ -210,11 +201,18 @@ def place_on_network(
                 found.append(reasons.get(i, "not on the network"))
             else:
                 found.append((str(position["edge"]), float(position["offset"])))
+    return _placed(table, [found[distinct[key]] for key in keys], bad)
+
+
+def _placed(
+    table: CallTable, found: Sequence[tuple[str, float] | str], bad: list[BadRow]
+) -> PlacedCalls:
+    """Each row's ``(edge, offset)``, or the reason it is bad (``found[row]``), as
+    :class:`PlacedCalls` with ``bad`` (the table's unreadable rows) added to."""
     rows: list[int] = []
     edges: list[str] = []
     offsets: list[float] = []
-    for row, key in enumerate(keys):
-        result = found[distinct[key]]
+    for row, result in enumerate(found):
         if isinstance(result, str):
             bad.append(BadRow(int(table.lines[row]), result))
             continue
