@@ -26,6 +26,11 @@ is loaded the same way in the same run, each against the trivial app in turns;
 ``fast_path_gain`` is the ratio of the two services' ratios to the trivial app (the
 head-to-head that decides whether the fast path stays).
 
+And the same service again with every consolidation solved inside the target that made
+it due (``ROUTING_SVC_CONSOLIDATION_WORKERS=0``) instead of in a worker process:
+``background_consolidation_gain`` (single targets, each against the trivial app in
+turns; the batch route; the single-target p99, inline over background).
+
 The fleets use the service's defaults; ``--probe 0`` measures the paper's rule alone.
 
 Prints one JSON document.
@@ -423,8 +428,33 @@ def main() -> int:
                 seconds=seconds, connections=args.connections, label="r",
                 baseline=f"http://127.0.0.1:{port}", rounds=args.rounds, probe=args.probe,
             )  # fmt: skip
+            # head to head: the same service solving each consolidation inside the target
+            # that made it due (no worker process)
+            inline_env = {
+                **os.environ,
+                "DATABASE_URL": f"sqlite:///{tmp / 'bench_inline.db'}",
+                "ROUTING_SVC_CONSOLIDATION_WORKERS": "0",
+            }
+            report["sqlite_consolidating_inline"] = bench_service(
+                env=inline_env, net=args.net, tmp=tmp, instances=1, edge_ids=edge_ids,
+                seconds=seconds, connections=args.connections, label="i",
+                baseline=f"http://127.0.0.1:{port}", rounds=args.rounds, probe=args.probe,
+            )  # fmt: skip
         finally:
             stop(trivial)
+        inline_trivial = report["sqlite_consolidating_inline"].pop("baseline")
+        ours, inline = report["sqlite"], report["sqlite_consolidating_inline"]
+        report["background_consolidation_gain"] = {
+            "single_targets_per_second": (
+                ours["targets"]["requests_per_second"]
+                / report["sqlite"]["baseline"]["requests_per_second"]
+            )
+            / (inline["targets"]["requests_per_second"] / inline_trivial["requests_per_second"]),
+            "batch_targets_per_second": ours["batch"]["targets_per_second"]
+            / inline["batch"]["targets_per_second"],
+            "single_p99_ms_inline_over_background": inline["targets"]["p99_ms"]
+            / ours["targets"]["p99_ms"],
+        }
         report["trivial"] = report["sqlite"].pop("baseline")
         route_trivial = report["sqlite_without_fast_path"].pop("baseline")
         report["fast_path_gain"] = (

@@ -12,7 +12,7 @@ a connection costs nothing. See :mod:`routing_svc.network.search`.
 from __future__ import annotations
 
 import functools
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -123,6 +123,11 @@ class RoadSpace:
         space._typical = None
         space.either_way = parent.either_way
         return space
+
+    def __reduce__(self) -> tuple[Callable[..., RoadSpace], tuple[object, ...]]:
+        """Pickled as its network, edge costs and turning rule (another process
+        allocates its own search buffers)."""
+        return (_rebuilt, (self.network, self._costs, self.either_way))
 
     @property
     def cost_kind(self) -> CostKind:
@@ -551,3 +556,9 @@ def _requirement_arrays(requirement: Requirement, n_vehicles: int) -> tuple[IntA
     if movers is not None and not 0 <= movers <= counts.shape[0]:
         raise InvalidInput("mover_groups must name a prefix of the requirement's groups")
     return groups, counts
+
+
+def _rebuilt(network: CompiledNetwork, costs: EdgeCosts, either_way: bool) -> RoadSpace:
+    """A pickled :class:`RoadSpace` (:meth:`RoadSpace.__reduce__`)."""
+    space = RoadSpace(network, cost=costs.kind, either_way=either_way)
+    return RoadSpace._derived(space, costs)

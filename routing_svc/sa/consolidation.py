@@ -413,6 +413,50 @@ def consolidate(
     )
 
 
+ConsolidationKey = tuple[int, int]
+"""Which due consolidation a job is for: the epoch and the target count it was due at
+(both only grow, so a key names one consolidation of a fleet's life)."""
+
+
+@dataclass(frozen=True, slots=True)
+class ConsolidationJob(Generic[P]):
+    """A due consolidation's inputs, copied when it fell due, so that it can be solved
+    away from the fleet (another thread or process) and applied later
+    (:meth:`routing_svc.sa.fleet.Fleet.consolidation_job`). The arguments are those of
+    :func:`consolidate`."""
+
+    key: ConsolidationKey
+    space: SampleSpace[P]
+    positions: tuple[P, ...]
+    anchor: tuple[P, ...]
+    reservoir: tuple[P, ...]
+    power: float
+    speed: float
+    confidence: float
+    updates: tuple[int, ...]
+    fresh: int
+    folds: int
+    refit: bool
+    stands: StandSet[P] | None
+
+    def solve(self) -> Consolidation[P]:
+        """:func:`consolidate` on the copied inputs."""
+        return consolidate(
+            self.space,
+            self.positions,
+            self.anchor,
+            self.reservoir,
+            power=self.power,
+            speed=self.speed,
+            confidence=self.confidence,
+            updates=self.updates,
+            fresh=self.fresh,
+            folds=self.folds,
+            refit=self.refit,
+            stands=self.stands,
+        )
+
+
 def move_pays(
     space: SampleSpace[P],
     positions: Sequence[P],

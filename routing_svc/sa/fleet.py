@@ -46,9 +46,10 @@ from routing_svc.errors import Conflict, InvalidInput, NotFound, ReplayMismatch
 from routing_svc.sa.annealing import Annealing
 from routing_svc.sa.consolidation import (
     Consolidation,
+    ConsolidationJob,
+    ConsolidationKey,
     ConsolidationPolicy,
     SampleSpace,
-    consolidate,
     move_pays,
 )
 from routing_svc.sa.held_step import Hold, JunctionSpace, held_step
@@ -330,6 +331,10 @@ class Fleet(Generic[P]):
     _resting: tuple[list[VehicleState[P]], bool] | None = field(
         init=False, repr=False, default=None
     )
+    defer_consolidations: bool = field(default=False, kw_only=True)
+    """A due consolidation waits to be solved away from the fleet
+    (:meth:`consolidation_job`) and handed to :meth:`observe` as ``solved``, instead of
+    being solved inside the target that made it due."""
 
     def __post_init__(self) -> None:
         if not self.vehicles:
@@ -495,16 +500,26 @@ class Fleet(Generic[P]):
         changes nothing."""
         return self._search(target, requires)[0]
 
-    def observe(self, target: P, requires: Sequence[str] | None = None) -> Outcome[P]:
+    def observe(
+        self,
+        target: P,
+        requires: Sequence[str] | None = None,
+        *,
+        solved: Solved[P] | None = None,
+    ) -> Outcome[P]:
         """Serve ``target`` and move the last-arriving vehicle toward it (eqs. (9)-(10)).
 
         A target for any one vehicle, without annealing noise, goes through the
         space's compiled form of this update when it has one
         (:class:`~routing_svc.sa.space.SingleTargetServing`), with the same result.
+        ``solved``: a consolidation solved away from the fleet (:meth:`consolidation_job`),
+        applied (and returned in the outcome) if it is still the due one, else dropped.
         """
         learning = self.state.learning
         if learning is not None and self.config.consolidation is not None:
-            return self._observe_held(learning, self.config.consolidation, target, requires)
+            return self._observe_held(
+                learning, self.config.consolidation, target, requires, solved=solved
+            )
         if not requires and self.config.annealing is None and self.at_rest():
             serving = self._serving()
             if serving is not None:
@@ -551,13 +566,16 @@ class Fleet(Generic[P]):
         policy: ConsolidationPolicy,
         target: P,
         requires: Sequence[str] | None,
+        *,
         recorded: Consolidation[P] | None = None,
+        replaying: bool = False,
+        solved: Solved[P] | None = None,
     ) -> Outcome[P]:
         """:meth:`observe` under the ``consolidating`` rule: the held step of the mover
         (:func:`~routing_svc.sa.held_step.held_step`; a move it would make is dropped,
         with its pressure, unless :func:`~routing_svc.sa.consolidation.move_pays` on the
-        reservoir), then the shift test and, when due, a consolidation (``recorded``:
-        apply that one instead of solving)."""
+        reservoir), then the shift test and, when due, a consolidation (see
+        :meth:`_learn_from` for ``recorded``, ``replaying`` and ``solved``)."""
         dispatch, found = self._search(target, requires)
         state = self.state
         mover = found.mover
@@ -601,7 +619,9 @@ class Fleet(Generic[P]):
         state.targets += 1
         consolidation = None
         if not requires and self._consolidates():
-            consolidation = self._learn_from(learning, policy, target, dispatch.objective, recorded)
+            consolidation = self._learn_from(
+                learning, policy, target, dispatch.objective, recorded, replaying, solved
+            )
         elif recorded is not None:
             raise ReplayMismatch("a consolidation was recorded for a target that makes none")
         return Outcome(index, dispatch, gamma, moved, 0.0, old, new, (), consolidation)
@@ -617,8 +637,15 @@ class Fleet(Generic[P]):
         target: P,
         cost: float,
         recorded: Consolidation[P] | None,
+        replaying: bool,
+        solved: Solved[P] | None,
     ) -> Consolidation[P] | None:
-        """Keep ``target``, run the shift test on its ``cost`` and consolidate when due."""
+        """Keep ``target``, run the shift test on its ``cost`` and consolidate when due.
+
+        A due consolidation is, in replay (``replaying``), the ``recorded`` one or none
+        (it was solved away from the fleet and applied at a later target); live,
+        ``solved`` when it answers this due one (its key), else none while
+        :attr:`defer_consolidations`, else solved here."""
         state = self.state
         learning.reservoir.append(target)
         learning.block_cost += cost
@@ -639,24 +666,18 @@ class Fleet(Generic[P]):
             if recorded is not None:
                 raise ReplayMismatch("a consolidation was recorded where none was due")
             return None
-        done = recorded
-        if done is None:
-            done = consolidate(
-                cast(SampleSpace[P], self.space),
-                state.positions,
-                learning.anchor,
-                list(learning.reservoir),
-                power=self.config.objective.power,
-                speed=float(self._speeds[0]),
-                confidence=policy.confidence,
-                updates=state.updates,
-                fresh=state.targets - learning.accepted_at,
-                folds=policy.folds,
-                refit=policy.refit is not None
-                and learning.fitted > 0
-                and len(learning.reservoir) >= policy.refit * learning.fitted,
-                stands=self.config.stands,
-            )
+        if replaying:
+            if recorded is None:  # solved away from the fleet, applied at a later target
+                return None
+            done = recorded
+        elif solved is not None and solved[0] == _key(learning):
+            done = solved[1]
+        elif self.defer_consolidations:
+            return None
+        else:
+            job = self.consolidation_job()
+            assert job is not None
+            done = job.solve()
         if len(done.positions) != len(self.vehicles) or len(done.updates) != len(self.vehicles):
             raise ReplayMismatch("a recorded consolidation does not match the fleet's vehicles")
         if done.accepted:
@@ -669,6 +690,42 @@ class Fleet(Generic[P]):
         learning.baseline = done.fresh_baseline if policy.fresh_baseline else done.baseline
         learning.next_consolidation = policy.next_after(now=state.targets, epoch=learning.epoch)
         return done
+
+    def due_consolidation(self) -> ConsolidationKey | None:
+        """The key of the consolidation due now, if one is (:meth:`consolidation_job`)."""
+        learning = self.state.learning
+        if (
+            learning is None
+            or self.config.consolidation is None
+            or not self._consolidates()
+            or self.state.targets < learning.next_consolidation
+        ):
+            return None
+        return _key(learning)
+
+    def consolidation_job(self) -> ConsolidationJob[P] | None:
+        """The due consolidation's inputs, copied (``None`` when none is due)."""
+        key = self.due_consolidation()
+        learning, policy, state = self.state.learning, self.config.consolidation, self.state
+        if key is None or learning is None or policy is None:
+            return None
+        return ConsolidationJob(
+            key=key,
+            space=cast(SampleSpace[P], self.space),
+            positions=tuple(state.positions),
+            anchor=tuple(learning.anchor),
+            reservoir=tuple(learning.reservoir),
+            power=self.config.objective.power,
+            speed=float(self._speeds[0]),
+            confidence=policy.confidence,
+            updates=tuple(state.updates),
+            fresh=state.targets - learning.accepted_at,
+            folds=policy.folds,
+            refit=policy.refit is not None
+            and learning.fitted > 0
+            and len(learning.reservoir) >= policy.refit * learning.fitted,
+            stands=self.config.stands,
+        )
 
     def replay_observe(
         self, target: P, requires: Sequence[str] | None, recorded: Consolidation[P] | None
@@ -686,7 +743,9 @@ class Fleet(Generic[P]):
             if recorded is not None:
                 raise ReplayMismatch("a consolidation was recorded for a fleet that makes none")
             return self.observe(target, requires)
-        return self._observe_held(learning, policy, target, requires, recorded)
+        return self._observe_held(
+            learning, policy, target, requires, recorded=recorded, replaying=True
+        )
 
     @property
     def compiled_update(self) -> bool:
@@ -978,3 +1037,12 @@ def _samples(kind: type) -> bool:
 def _is_directed(kind: type) -> bool:
     """Whether spaces of class ``kind`` are :class:`DirectedSpace` s."""
     return _offers(kind, "back_probes", "arrival_times", "back_off", "entry")
+
+
+Solved = tuple[ConsolidationKey, Consolidation[P]]
+"""A consolidation solved away from the fleet, with the key of the job it answers."""
+
+
+def _key(learning: Learning[Any]) -> ConsolidationKey:
+    """The key of the consolidation due now (or next)."""
+    return (learning.epoch, learning.next_consolidation)

@@ -118,7 +118,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             load_networks(registry, log, settings)
             for entry in registry.all():
                 await asyncio.to_thread(entry.warm_up)
-            service = FleetService(log, registry, recent_window=settings.recent_window)
+            service = FleetService(
+                log,
+                registry,
+                recent_window=settings.recent_window,
+                consolidation_workers=settings.consolidation_workers,
+            )
             fleet_gauges.COLLECTOR.track(service)
             app.state.settings = settings
             app.state.networks = registry

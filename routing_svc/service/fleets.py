@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from routing_svc.errors import Conflict, UnknownFleet, UnknownNetwork
+from routing_svc.service.background_solver import ConsolidationSolver
 from routing_svc.service.canonical import dumps
 from routing_svc.service.creation import build_created_payload
 from routing_svc.service.networks import NetworkEntry, NetworkRegistry
@@ -39,10 +40,21 @@ def request_hash(body: Any) -> str:
 class FleetService:
     """Fleets, targets and travel times, durable in an :class:`EventLog`."""
 
-    def __init__(self, log: EventLog, networks: NetworkRegistry, *, recent_window: int) -> None:
+    def __init__(
+        self,
+        log: EventLog,
+        networks: NetworkRegistry,
+        *,
+        recent_window: int,
+        consolidation_workers: int = 0,
+    ) -> None:
         self.log = log
         self.networks = networks
         self.recent_window = recent_window
+        self.solver = (
+            ConsolidationSolver(consolidation_workers) if consolidation_workers > 0 else None
+        )
+        """Where due consolidations are solved (``None``: on the write path)."""
         self._cache: dict[str, FleetRuntime] = {}
         self._locks: dict[str, threading.Lock] = {}
         self._locks_guard = threading.Lock()
@@ -82,7 +94,11 @@ class FleetService:
         entry = self.network(record.network_id)
         first = self.log.events(fleet_id, after=0, limit=1)[0]
         runtime = FleetRuntime(
-            fleet_id, entry, json.loads(first.payload_json), recent_window=self.recent_window
+            fleet_id,
+            entry,
+            json.loads(first.payload_json),
+            recent_window=self.recent_window,
+            solver=self.solver,
         )
         if (
             record.state_json is not None
@@ -90,7 +106,11 @@ class FleetService:
             and not runtime.restore(record.state_json)
         ):  # a snapshot older than service levels: replay the fleet from its start
             runtime = FleetRuntime(
-                fleet_id, entry, json.loads(first.payload_json), recent_window=self.recent_window
+                fleet_id,
+                entry,
+                json.loads(first.payload_json),
+                recent_window=self.recent_window,
+                solver=self.solver,
             )
         self.catch_up(runtime, self.log.events_since(fleet_id, runtime.version))
         return runtime
@@ -144,13 +164,17 @@ class FleetService:
     def close(self) -> None:
         """Commit the queued writes and stop the writers (:meth:`GroupCommit.close`)."""
         self.group_commit.close()
+        if self.solver is not None:
+            self.solver.close()
 
     # -- fleets -----------------------------------------------------------------
 
     def create_fleet(self, spec: FleetSpec) -> dict[str, Any]:
         entry = self.network(spec.network)
         created = build_created_payload(spec, entry)
-        runtime = FleetRuntime(spec.id, entry, created, recent_window=self.recent_window)
+        runtime = FleetRuntime(
+            spec.id, entry, created, recent_window=self.recent_window, solver=self.solver
+        )
         self.log.create_fleet(spec.id, entry.id, dumps(created["config"]), dumps(created))
         with self._locked(spec.id):
             self._cache[spec.id] = runtime
@@ -365,7 +389,11 @@ class FleetService:
         entry = self.network(record.network_id)
         events = self.log.events_since(fleet_id, 0)
         runtime = FleetRuntime(
-            fleet_id, entry, json.loads(events[0].payload_json), recent_window=self.recent_window
+            fleet_id,
+            entry,
+            json.loads(events[0].payload_json),
+            recent_window=self.recent_window,
+            solver=self.solver,
         )
         identical = None
         at = record.snapshot_version

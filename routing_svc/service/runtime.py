@@ -8,8 +8,10 @@ applied events):
 - ``target``: a snapped target position and its required types; the result is
   the answer the client got (:meth:`FleetRuntime.apply_target`: the dispatch
   answer, who goes now, and the learning step, whose reference moved), with the
-  consolidation the target triggered, if any (``consolidating`` fleets), which
-  replay applies as recorded instead of solving it again;
+  consolidation the target applied, if any (``consolidating`` fleets; solved in a
+  worker since the target that made it due, :mod:`routing_svc.service.background_solver`,
+  or inside the target without one), which replay applies as recorded instead of
+  solving it again;
 - ``weights_updated``: per-edge travel times (traffic-driven costs);
 - ``vehicle_state``: vehicles' new live states (status, current position or
   ``null`` for "at its reference", timestamp), applied all or none;
@@ -32,6 +34,10 @@ from routing_svc.errors import Conflict, InvalidInput, ReplayMismatch
 from routing_svc.network import RoadSpace
 from routing_svc.sa import Consolidation, Fleet, FleetConfig, Vehicle
 from routing_svc.sa.live import Status, VehicleState
+from routing_svc.service.background_solver import (
+    ConsolidationSolver,
+    PendingConsolidation,
+)
 from routing_svc.service.canonical import TargetResult, dumps, target_payload
 from routing_svc.service.networks import NetworkEntry
 from routing_svc.service.reference import build_demand, expected_cost_now
@@ -43,7 +49,13 @@ class FleetRuntime:
     """The in-memory state of one fleet, advanced only by events."""
 
     def __init__(
-        self, fleet_id: str, entry: NetworkEntry, created: dict[str, Any], *, recent_window: int
+        self,
+        fleet_id: str,
+        entry: NetworkEntry,
+        created: dict[str, Any],
+        *,
+        recent_window: int,
+        solver: ConsolidationSolver | None = None,
     ) -> None:
         self.id = fleet_id
         self.entry = entry
@@ -63,6 +75,9 @@ class FleetRuntime:
             vehicles,
             FleetConfig.from_dict(created["config"], self.base_space.decode),
         )
+        self._solver = solver
+        self._pending: PendingConsolidation[NetPosition] | None = None
+        self.fleet.defer_consolidations = solver is not None
         self.version = 1
         self.deleted = False
         self.cost_sum = 0.0
@@ -95,7 +110,9 @@ class FleetRuntime:
         if replaying:
             outcome = self.fleet.replay_observe(target, requires, recorded)
         else:
-            outcome = self.fleet.observe(target, requires)
+            solved = None if self._pending is None else self._pending.solved()
+            outcome = self.fleet.observe(target, requires, solved=solved)
+            self._hand_over_due()
         seq = self.version + 1
         d = outcome.dispatch
         described = self.entry.describe(target)
@@ -131,6 +148,20 @@ class FleetRuntime:
         self.recent.append(d.cost)
         self.levels.record(d.cost if d.sent is None else d.sent.completion)
         return payload, result
+
+    def _hand_over_due(self) -> None:
+        """Drop a job that was applied or went stale; hand the due consolidation, if
+        any, to the solver (:mod:`~routing_svc.service.background_solver`)."""
+        if self._solver is None:
+            return
+        due = self.fleet.due_consolidation()
+        if self._pending is not None and self._pending.key != due:
+            self._pending.answer.cancel()
+            self._pending = None
+        if due is not None and self._pending is None:
+            job = self.fleet.consolidation_job()
+            assert job is not None
+            self._pending = PendingConsolidation(job, self._solver.submit(job))
 
     def apply_vehicle_states(
         self, changes: Sequence[tuple[str, VehicleState[NetPosition]]]

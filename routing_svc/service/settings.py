@@ -36,6 +36,10 @@ class Settings(BaseSettings):
         Targets per second that the demo feeder posts to the demo fleet (0: off).
     recent_window : int
         How many recent targets the "recent" mean cost covers.
+    consolidation_workers : int
+        Processes that solve the due consolidations of ``consolidating`` fleets off the
+        write path (:mod:`routing_svc.service.background_solver`); 0 solves each inside
+        the target that made it due.
     target_fast_path : bool
         Serve ``POST /v1/fleets/{id}/targets`` from the ASGI layer for valid
         bodies (:mod:`routing_svc.service.fastpath`); off, FastAPI's route serves
@@ -77,6 +81,7 @@ class Settings(BaseSettings):
     demo_fleet: bool = False
     demo_rate: float = 0.0
     recent_window: int = 200
+    consolidation_workers: int = Field(default=1, ge=0)
     target_fast_path: bool = True
     request_timeout_s: float = Field(default=30.0, gt=0)
     health_timeout_s: float = Field(default=2.0, gt=0)

@@ -759,7 +759,7 @@ def test_each_consolidation_tests_the_targets_since_the_last_acceptance(
         calls.append(kw | copies | {"reservoir": list(reservoir), "updates": list(kw["updates"])})
         return consolidate(space_, positions, anchor, reservoir, **kw)
 
-    monkeypatch.setattr("routing_svc.sa.fleet.consolidate", recording)
+    monkeypatch.setattr("routing_svc.sa.consolidation.consolidate", recording)
     fleet = consolidating_fleet(space, policy=CALM)
     starts = list(fleet.state.positions)
     for z, out in zip(stream, outcomes, strict=True):
@@ -814,7 +814,7 @@ def test_replay_applies_the_recorded_consolidations_without_solving(
     def no_solving(*args: object, **kwargs: object) -> None:
         raise AssertionError("replay solved a consolidation")
 
-    monkeypatch.setattr("routing_svc.sa.fleet.consolidate", no_solving)
+    monkeypatch.setattr("routing_svc.sa.consolidation.consolidate", no_solving)
     replayed = consolidating_fleet(space, policy=CALM)
     for z, out in zip(stream, outcomes, strict=True):
         recorded = out.consolidation
@@ -1213,3 +1213,90 @@ def test_a_held_move_is_taken_only_where_it_lowers_the_reservoirs_cost(space: Ro
     checked = held_moves(space, ConsolidationPolicy(reservoir=400, first=200, shift_ratio=1e9))
     assert checked
     assert all(after < before for before, after in checked)
+
+
+def test_a_deferred_fleet_applies_a_consolidation_solved_away_from_it_later(
+    calm_run: Run, space: RoadSpace, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    stream, _, outcomes = calm_run
+    k = next(o.index for o in outcomes if o.consolidation is not None)  # due after k + 1
+    lag = 37
+    inline = consolidating_fleet(space, policy=CALM)
+    for z in stream[: k + 1]:
+        inline.observe(z)
+    deferred = consolidating_fleet(space, policy=CALM)
+    deferred.defer_consolidations = True
+    for z in stream[: k + 1]:
+        assert deferred.observe(z).consolidation is None
+    key = deferred.due_consolidation()
+    job = deferred.consolidation_job()
+    assert job is not None and key == job.key == (0, k + 1)
+    # the job holds what the inline fleet solved at the same target
+    assert job.reservoir == tuple(stream[: k + 1])
+    assert list(job.positions) == deferred.state.positions
+    done = job.solve()
+    assert done == outcomes[k].consolidation
+
+    def no_solving(*args: object, **kwargs: object) -> None:
+        raise AssertionError("a deferred fleet solved a consolidation")
+
+    monkeypatch.setattr("routing_svc.sa.consolidation.consolidate", no_solving)
+    recorded: list[Consolidation[NetPosition] | None] = [None] * (k + 1)
+    for z in stream[k + 1 : k + 1 + lag]:  # the solve takes a while: still due, none applied
+        assert deferred.observe(z).consolidation is None
+        assert deferred.due_consolidation() == key
+        recorded.append(None)
+    # an answer to another job is dropped
+    stale = deferred.observe(stream[k + 1 + lag], solved=((0, k), done))
+    assert stale.consolidation is None and deferred.due_consolidation() == key
+    recorded.append(None)
+    applied = deferred.observe(stream[k + 2 + lag], solved=(key, done))
+    recorded.append(applied.consolidation)
+    assert applied.consolidation == done
+    assert deferred.due_consolidation() is None
+    learning = deferred.state.learning
+    assert learning is not None
+    if done.accepted:
+        assert deferred.state.positions == list(done.positions)
+        assert learning.accepted_at == k + 3 + lag
+    # the schedule runs on from where it was applied
+    assert learning.next_consolidation == CALM.next_after(now=k + 3 + lag, epoch=0)
+    # replay applies it where it was recorded, without solving, bit for bit
+    replayed = consolidating_fleet(space, policy=CALM)
+    for z, r in zip(stream[: k + 3 + lag], recorded, strict=True):
+        replayed.replay_observe(z, None, r)
+    assert json.dumps(replayed.snapshot()) == json.dumps(deferred.snapshot())
+
+
+def test_a_shift_makes_a_pending_consolidation_stale(space: RoadSpace) -> None:
+    xmin, ymin, xmax, ymax = NET.bounds
+    dx, dy = xmax - xmin, ymax - ymin
+    spread = 0.05 * math.hypot(dx, dy)
+    _, west = demand_stream(8, 2000, centres=[(xmin + 0.2 * dx, ymin + 0.2 * dy)], spread=spread)
+    _, east = demand_stream(9, 400, centres=[(xmin + 0.8 * dx, ymin + 0.8 * dy)], spread=spread)
+    policy = ConsolidationPolicy(shift_ratio=2.0)  # as in the test of the shift above
+    fleets = [consolidating_fleet(space, policy=policy) for _ in range(2)]
+    due = schedule(policy, start=policy.first, epoch=0, until=2000)[-1]  # 1902
+    for fleet in fleets:
+        for z in west[: due - 1]:
+            fleet.observe(z)
+        fleet.defer_consolidations = True
+    given, twin = fleets
+    stream = [*west[due - 1 :], *east]
+    given.observe(stream[0])
+    twin.observe(stream[0])
+    job = given.consolidation_job()
+    assert job is not None and job.key == (0, due)
+    done = job.solve()
+    for z in stream[1:]:  # the solve is slow: the demand moves before it is applied
+        given.observe(z)
+        twin.observe(z)
+        if given.due_consolidation() != job.key:
+            break
+    learning = given.state.learning
+    assert learning is not None and learning.epoch == 2250  # a new epoch, first_shift above
+    assert given.due_consolidation() is None
+    out = given.observe(east[-1], solved=(job.key, done))
+    twin.observe(east[-1])
+    assert out.consolidation is None
+    assert json.dumps(given.snapshot()) == json.dumps(twin.snapshot())

@@ -2,8 +2,9 @@
 
 On SQLite and PostgreSQL (the ``db_url`` fixture). The default rule of a new fleet
 consolidates after its 250th and 500th targets (``ConsolidationPolicy``: first 250,
-growth 1.5); each consolidation is part of the result of the target that triggered
-it, and a restart or a replay applies it as recorded.
+growth 1.5); solved on the write path (``consolidation_workers=0``), each consolidation
+is part of the result of the target that triggered it, and a restart or a replay
+applies it as recorded. ``test_background_consolidation.py``: solved off it.
 """
 
 from __future__ import annotations
@@ -69,7 +70,9 @@ class Service:
         self.client: TestClient | None = None
 
     def start(self) -> TestClient:
-        client = TestClient(create_app(make_settings(self.db_url, self.tmp_path)))
+        client = TestClient(
+            create_app(make_settings(self.db_url, self.tmp_path, consolidation_workers=0))
+        )
         client.__enter__()
         self.client = client
         return client
@@ -146,7 +149,7 @@ def test_consolidations_are_recorded_survive_a_restart_and_replay(
         raise AssertionError("a restart solved a consolidation again")
 
     with monkeypatch.context() as patch:
-        patch.setattr("routing_svc.sa.fleet.consolidate", no_solving)
+        patch.setattr("routing_svc.sa.consolidation.consolidate", no_solving)
         client = service.restart()
         after = client.get("/v1/fleets/restarted")
         assert after.status_code == 200

@@ -1,0 +1,96 @@
+"""Consolidations solved in worker processes, off the write path.
+
+A ``consolidating`` fleet's due consolidation (a p-median of its reservoir, solved
+once per fold and once on the whole, :func:`routing_svc.sa.consolidation.consolidate`)
+takes up to seconds. Solved inside the target that made it due, it would hold that
+target's answer and every write queued behind it. The service hands it instead to a
+worker process (:meth:`ConsolidationSolver.submit`) and keeps serving with the
+references it has; the first target of the fleet after the solve finished applies
+it, if it is still the due one, and that target's event records it, so that replay
+applies it at the same place without solving (:mod:`routing_svc.service.runtime`).
+
+Processes, not threads: the solve (scipy's Dijkstra, the compiled interchange) holds
+the GIL, and a thread would stall the write path as much as solving inline.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import threading
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from typing import Generic
+
+from routing_svc.sa.consolidation import Consolidation, ConsolidationJob, ConsolidationKey
+from routing_svc.sa.space import P
+
+logger = logging.getLogger(__name__)
+
+
+def _solve(job: ConsolidationJob[P]) -> Consolidation[P]:
+    return job.solve()
+
+
+class ConsolidationSolver:
+    """Worker processes that solve consolidation jobs, started on the first job.
+
+    Parameters
+    ----------
+    workers : int
+        Processes (at least 1).
+    """
+
+    def __init__(self, workers: int = 1) -> None:
+        if workers < 1:
+            raise ValueError("a consolidation solver needs at least one worker")
+        self.workers = workers
+        self._pool: ProcessPoolExecutor | None = None
+        self._guard = threading.Lock()
+
+    def submit(self, job: ConsolidationJob[P]) -> Future[Consolidation[P]]:
+        """Solve ``job`` in a worker; a pool whose worker died is started again."""
+        with self._guard:
+            for _ in range(2):
+                if self._pool is None:
+                    self._pool = ProcessPoolExecutor(
+                        self.workers, mp_context=multiprocessing.get_context("spawn")
+                    )
+                try:
+                    return self._pool.submit(_solve, job)
+                except BrokenProcessPool:
+                    self._pool.shutdown(wait=False, cancel_futures=True)
+                    self._pool = None
+            raise RuntimeError("the consolidation workers cannot be started")
+
+    def close(self) -> None:
+        """Stop the workers; jobs not finished are dropped (their fleets are still due,
+        and solve again when the service comes back)."""
+        with self._guard:
+            if self._pool is not None:
+                self._pool.shutdown(wait=True, cancel_futures=True)
+                self._pool = None
+
+
+@dataclass(frozen=True, slots=True)
+class PendingConsolidation(Generic[P]):
+    """A job handed to the solver and its future answer."""
+
+    job: ConsolidationJob[P]
+    answer: Future[Consolidation[P]]
+
+    @property
+    def key(self) -> ConsolidationKey:
+        return self.job.key
+
+    def solved(self) -> tuple[ConsolidationKey, Consolidation[P]] | None:
+        """The answer when it is ready (``None`` before). A solve that failed in the
+        worker is solved here, so that it fails, if it must, as it would inline."""
+        if not self.answer.done():
+            return None
+        try:
+            return self.key, self.answer.result()
+        except Exception:
+            logger.exception("a consolidation failed in its worker; solving it on the write path")
+            return self.key, self.job.solve()

@@ -1,0 +1,107 @@
+"""Consolidations solved off the write path (the service's default), through HTTP.
+
+A worker process solves the consolidation that the 250th target made due, on the
+inputs of that moment; the first target after the solve finished applies it and
+records it. Replay applies it there without solving; a restart while it is being
+solved solves it again and applies it later.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+from fastapi.testclient import TestClient
+
+from routing_svc.sa.consolidation import ConsolidationPolicy
+from routing_svc.service import replay_command
+from routing_svc.service.app import create_app
+from tests.helpers import make_settings
+from tests.service.test_consolidating_replay import fleet_body, post_all, target_stream
+
+FIRST = ConsolidationPolicy().first
+PATIENCE_S = 120.0
+
+
+def start(db_url: str, tmp_path: Path) -> TestClient:
+    client = TestClient(create_app(make_settings(db_url, tmp_path)))
+    client.__enter__()
+    return client
+
+
+def post_until_consolidated(
+    client: TestClient, fleet_id: str, targets: list[dict[str, Any]]
+) -> tuple[dict[str, Any], int]:
+    """Post ``targets`` one at a time, pausing, until a result records a consolidation;
+    that result and how many were posted."""
+    deadline = time.monotonic() + PATIENCE_S
+    for k, body in enumerate(targets, start=1):
+        r = client.post(f"/v1/fleets/{fleet_id}/targets", json=body)
+        assert r.status_code == 200, r.text
+        if "consolidated" in r.json():
+            return r.json(), k
+        assert time.monotonic() < deadline, "no consolidation was applied"
+        time.sleep(0.05)
+    raise AssertionError("no consolidation was applied")
+
+
+def replay_report(db_url: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Any:
+    args = argparse.Namespace(
+        db=None, database_url=db_url, fleet=[], data_dir=tmp_path / "networks"
+    )
+    capsys.readouterr()
+    code = replay_command.run(args)
+    report = json.loads(capsys.readouterr().out)
+    assert code == 0, report
+    return report
+
+
+def test_a_consolidation_solved_off_the_write_path_is_applied_later_and_replayed(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    sqlite_url = f"sqlite:///{tmp_path / 'events.db'}"
+    targets = target_stream(FIRST + 400)
+    client = start(sqlite_url, tmp_path)
+    try:
+        assert client.app.state.fleets.solver is not None  # type: ignore[attr-defined]
+        for fleet_id in ("steady", "restarted"):
+            r = client.post("/v1/fleets", json=fleet_body(fleet_id))
+            assert r.status_code == 201, r.text
+        head = post_all(client, "steady", targets[:FIRST])
+        # the 250th target (seq 251) made it due: none is solved inside a target
+        assert not any("consolidated" in r for r in head)
+        result, _ = post_until_consolidated(client, "steady", targets[FIRST:])
+        assert result["seq"] > FIRST + 1
+        record = result["consolidated"]
+        # solved on the reservoir of the moment it fell due
+        assert record["sample"] == FIRST
+        assert len(record["positions"]) == len(record["updates"]) == 4
+        if record["accepted"]:  # the step came first: the references are the record's
+            fleet = client.get("/v1/fleets/steady").json()
+            assert [
+                (v["position"]["edge"], v["position"]["offset"]) for v in fleet["vehicles"]
+            ] == [(p["edge"], p["offset"]) for p in record["positions"]]
+        # a restart while the consolidation is being solved: it is solved again
+        post_all(client, "restarted", targets[:FIRST])
+    finally:
+        client.__exit__(None, None, None)
+    client = start(sqlite_url, tmp_path)
+    try:
+        again, _ = post_until_consolidated(client, "restarted", targets[FIRST:])
+        assert again["consolidated"]["sample"] >= FIRST
+    finally:
+        client.__exit__(None, None, None)
+
+    def no_solving(*args: object, **kwargs: object) -> None:
+        raise AssertionError("replay solved a consolidation")
+
+    monkeypatch.setattr("routing_svc.sa.consolidation.consolidate", no_solving)
+    report = replay_report(sqlite_url, tmp_path, capsys)
+    assert report["ok"] is True
+    assert {f["fleet"] for f in report["fleets"] if f["ok"]} == {"steady", "restarted"}
