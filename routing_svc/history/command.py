@@ -26,7 +26,7 @@ from typing import Any, cast
 
 from routing_svc.errors import InvalidInput
 from routing_svc.history.calls import read_calls
-from routing_svc.history.creation import history_fleet_spec
+from routing_svc.history.creation import history_fleet_spec, history_vehicle_types
 from routing_svc.history.places import (
     PlacedCalls,
     place_locally,
@@ -195,11 +195,14 @@ def run_create(args: argparse.Namespace) -> int:
             from routing_svc.network.catalogue import resolve_network
 
             client.add_network(resolve_network(path), name=name)
+        types = history_vehicle_types(args.vehicles)  # the calls the new fleet can serve
         if isinstance(client, HttpHistoryClient):
-            placed = place_on_network(table, client, name, progress=not args.quiet)
+            placed = place_on_network(
+                table, client, name, vehicle_types=types, progress=not args.quiet
+            )
         else:
             entry = cast(InProcessHistoryClient, client).service.network(name)
-            placed = place_locally(table, entry, vehicle_types=None)
+            placed = place_locally(table, entry, vehicle_types=types)
         bad = placed.bad
         if bad and args.on_bad_row == "refuse":
             from routing_svc.history.replay import HistoryRefused

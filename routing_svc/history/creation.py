@@ -18,7 +18,7 @@ import numpy.typing as npt
 from routing_svc.history.calls import CallTable
 from routing_svc.history.places import PlacedCalls
 from routing_svc.history.replay import time_order
-from routing_svc.service.schemas import OptimumStart
+from routing_svc.service.schemas import OptimumStart, VehicleSpec
 
 MAX_SAMPLE: int = next(
     m.max_length for m in OptimumStart.model_fields["sample"].metadata if hasattr(m, "max_length")
@@ -45,6 +45,16 @@ def history_sample(table: CallTable, placed: PlacedCalls | None) -> list[dict[st
     ]
 
 
+def history_vehicles(vehicles: int) -> list[dict[str, Any]]:
+    """The vehicles of a fleet created from a history: ``vehicles`` identical ones."""
+    return [{"id": f"v{i:03d}"} for i in range(vehicles)]
+
+
+def history_vehicle_types(vehicles: int) -> list[str]:
+    """The type of each vehicle of :func:`history_vehicles` (the API's default type)."""
+    return [VehicleSpec.model_validate(v).type for v in history_vehicles(vehicles)]
+
+
 def history_fleet_spec(
     table: CallTable,
     placed: PlacedCalls | None,
@@ -62,6 +72,6 @@ def history_fleet_spec(
         "network": network,
         "cost": cost,
         "seed": seed,
-        "vehicles": [{"id": f"v{i:03d}"} for i in range(vehicles)],
+        "vehicles": history_vehicles(vehicles),
         "start": {"optimum": {"sample": history_sample(table, placed)}},
     }

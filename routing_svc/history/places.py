@@ -13,7 +13,9 @@ learns exactly from the checked positions:
   for each distinct place and requirement, which resolves the place, checks the
   types and changes nothing; its answer gives the position;
 - against a server, before the fleet exists (:func:`place_on_network`):
-  ``POST /v1/networks/{id}/positions:resolve``, the places only.
+  ``POST /v1/networks/{id}/positions:resolve`` for the places, and the required
+  types against the vehicle types the fleet will have, by the same rule as in
+  process.
 
 A row fails when its place is off the map (farther than ``SNAP_DISTANCE_M`` from
 every usable edge, or an edge the network does not use, an offset past the
@@ -176,10 +178,16 @@ class PositionResolver(Protocol):
 
 
 def place_on_network(
-    table: CallTable, client: PositionResolver, network_id: str, *, progress: bool = True
+    table: CallTable,
+    client: PositionResolver,
+    network_id: str,
+    *,
+    vehicle_types: Sequence[str] | None,
+    progress: bool = True,
 ) -> PlacedCalls:
     """Resolve every row's place with the server's ``positions:resolve`` (once per distinct
-    place, :data:`MAX_RESOLVED_POSITIONS` at a time); required types are not checked."""
+    place, :data:`MAX_RESOLVED_POSITIONS` at a time) and check its required types against
+    ``vehicle_types`` as :func:`place_locally` does (``None`` skips the type check)."""
     bad = list(table.bad)
     distinct: dict[tuple[object, ...], int] = {}
     places: list[dict[str, Any]] = []
@@ -201,7 +209,13 @@ def place_on_network(
                 found.append(reasons.get(i, "not on the network"))
             else:
                 found.append((str(position["edge"]), float(position["offset"])))
-    return _placed(table, [found[distinct[key]] for key in keys], bad)
+    unmet = _requirement_errors(table.requires, vehicle_types)
+    per_row = [found[distinct[key]] for key in keys]
+    checked = [
+        unmet.get(needs, result) if needs is not None and not isinstance(result, str) else result
+        for result, needs in zip(per_row, table.requires, strict=True)
+    ]
+    return _placed(table, checked, bad)
 
 
 def _placed(

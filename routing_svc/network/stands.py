@@ -29,6 +29,7 @@ import sumolib
 from routing_svc.errors import InvalidInput, InvalidNetwork
 from routing_svc.network.compile import CompiledNetwork
 from routing_svc.network.safe_xml import check_xml_file
+from routing_svc.sa.stands import StandSet
 from routing_svc.types import NetPosition
 
 __all__ = ["DroppedStand", "Stand", "StandReading", "read_stands_file", "stands_on_network"]
@@ -73,6 +74,20 @@ class StandReading:
         """The usable stands' total capacity."""
         return sum(s.capacity for s in self.usable)
 
+    def stand_set(self, network: CompiledNetwork) -> StandSet[NetPosition]:
+        """The usable stands as a :class:`~routing_svc.sa.stands.StandSet` of ``network``;
+        stands at one position add their capacities (:meth:`StandSet.merged`).
+
+        Raises
+        ------
+        InvalidInput
+            No stand is usable.
+        """
+        positions = self.positions(network)
+        return StandSet.merged(
+            [(p, s.capacity) for p, s in zip(positions, self.usable, strict=True)]
+        )
+
 
 def stands_on_network(stands: Iterable[Stand], network: CompiledNetwork) -> StandReading:
     """Split ``stands`` into those ``network`` can use and the dropped ones.
@@ -102,10 +117,12 @@ def read_stands_file(path: Path, network: CompiledNetwork) -> StandReading:
     Raises
     ------
     InvalidInput
-        The file is not well-formed XML, or its root is not ``<additional>``; a
-        ``parkingArea`` lacks ``id`` or ``lane``, or has a position or capacity
-        that is not a number.
+        There is no file at ``path``; the file is not well-formed XML, or its root
+        is not ``<additional>``; a ``parkingArea`` lacks ``id`` or ``lane``, or has a
+        position or capacity that is not a number.
     """
+    if not Path(path).is_file():
+        raise InvalidInput(f"no stands file at {path}")
     try:
         check_xml_file(Path(path), root="additional")
     except InvalidNetwork as exc:

@@ -4,14 +4,20 @@
 
     routing-svc optimum --net PATH --vehicles P [--demand SPEC]
         [--cost length|time] [--seed S] [--method auto|milp|heuristic]
-        [--max-sites N] [--time-limit SECONDS]
+        [--max-sites N] [--time-limit SECONDS] [--stands FILE.add.xml]
 
 prints one JSON object: the expected cost of the best configuration found
 (``objective``, in metres or seconds), the vehicle positions (SUMO edge id,
 offset, x, y), how it was found (``method``, ``proven_optimal``,
 ``lower_bound``, ``seconds``) and the problem size (``n_sites``,
-``n_demand``). Bad input raises :class:`~routing_svc.errors.RoutingSvcError`,
-which ``routing_svc.cli`` turns into a one-line message and exit code 2.
+``n_demand``). With ``--stands`` the vehicles park at the usable stands of a SUMO
+additional file (read as ``routing-svc stands`` reads it), within their
+capacities (:func:`~routing_svc.optimum.stands.solve_stands`; one position per
+vehicle, repeated at a stand that holds several); the report adds the stands
+read (``stands``), the optimum without them (``free_objective``) and
+``ratio`` = ``objective / free_objective``. Bad input raises
+:class:`~routing_svc.errors.RoutingSvcError`, which ``routing_svc.cli`` turns into a
+one-line message and exit code 2.
 """
 
 from __future__ import annotations
@@ -28,9 +34,11 @@ from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork, RoadSpace, load_network
 from routing_svc.network.catalogue import resolve_network
 from routing_svc.network.costs import CostKind
+from routing_svc.network.stands import StandReading, read_stands_file
 from routing_svc.optimum.evaluate import expected_cost
 from routing_svc.optimum.pmedian import Method
-from routing_svc.optimum.solve import solve_demand
+from routing_svc.optimum.solve import DemandOptimum, solve_demand
+from routing_svc.optimum.stands import solve_stands
 from routing_svc.types import NetPosition
 
 _UNITS = {"length": "m", "time": "s"}
@@ -65,6 +73,14 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     parser.add_argument(
         "--time-limit", type=float, default=60.0, metavar="SECONDS", help="for the exact method"
     )
+    parser.add_argument(
+        "--stands",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="park at the usable stands (parkingAreas) of a SUMO additional file, within "
+        "their capacities; adds the free optimum's objective and the ratio stands/free",
+    )
     parser.set_defaults(run=run)
 
 
@@ -79,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
         method=args.method,
         max_sites=args.max_sites,
         time_limit=args.time_limit,
+        stands=args.stands,
     )
     print(json.dumps(report, indent=2))
     return 0
@@ -94,6 +111,7 @@ def optimum_report(
     method: str = "auto",
     max_sites: int | None = None,
     time_limit: float = 60.0,
+    stands: Path | None = None,
 ) -> dict[str, Any]:
     """Build the network, demand and candidate sites, solve, and report.
 
@@ -115,6 +133,10 @@ def optimum_report(
         Subsample the candidate sites to at most this many.
     time_limit : float
         Seconds for the exact method.
+    stands : Path, optional
+        A SUMO additional file whose usable ``parkingArea`` elements
+        (:func:`~routing_svc.network.stands.read_stands_file`) are the only places
+        vehicles may park.
 
     Returns
     -------
@@ -125,7 +147,8 @@ def optimum_report(
     ------
     RoutingSvcError
         Any bad input (missing file, ``vehicles < 1`` or above the number of
-        sites, a bad demand spec, ...).
+        sites, a bad demand spec, a stands file without a usable stand or with
+        too little capacity for the fleet, ...).
     """
     if vehicles < 1:
         raise InvalidInput(f"--vehicles must be >= 1, got {vehicles}")
@@ -139,8 +162,9 @@ def optimum_report(
     network = load_network(path)
     recipe = parse_demand_spec(demand)
     distribution = network_demand(network, recipe, rng=np.random.default_rng(seed))
+    reading = None if stands is None else _usable_stands(stands, network, vehicles)
     space = RoadSpace(network, cost=_COSTS[cost])
-    best = solve_demand(
+    free = solve_demand(
         space,
         distribution,
         vehicles,
@@ -149,9 +173,19 @@ def optimum_report(
         method=_METHODS[method],
         time_limit=time_limit,
     )
+    best: DemandOptimum[NetPosition] = free
+    if reading is not None:
+        best = solve_stands(
+            space,
+            distribution,
+            vehicles,
+            reading.stand_set(network),
+            method=_METHODS[method],
+            time_limit=time_limit,
+        )
     solution = best.solution
     value = expected_cost(space, best.positions, np.ones(len(best.positions)), distribution)
-    return {
+    report = {
         "network": Path(path).name,
         "demand": distribution.name,
         "cost": cost,
@@ -167,6 +201,39 @@ def optimum_report(
         "n_demand": len(distribution),
         "seed": seed,
     }
+    if reading is not None:
+        assert stands is not None
+        unbounded = expected_cost(space, free.positions, np.ones(len(free.positions)), distribution)
+        report |= {
+            "stands": {
+                "file": stands.name,
+                "usable": len(reading.usable),
+                "dropped": len(reading.dropped),
+                "capacity": reading.capacity,
+            },
+            "free_objective": unbounded,
+            "ratio": value / unbounded if unbounded > 0.0 else None,
+        }
+    return report
+
+
+def _usable_stands(path: Path, network: CompiledNetwork, vehicles: int) -> StandReading:
+    """The stands of ``path`` that ``network`` can use, holding ``vehicles``.
+
+    Raises
+    ------
+    InvalidInput
+        No usable stand (the first dropped ones named), or too little capacity.
+    """
+    reading = read_stands_file(path, network)
+    if not reading.usable:
+        why = "; ".join(f"{d.id} (edge {d.edge}): {d.reason}" for d in reading.dropped[:3])
+        raise InvalidInput(
+            f"no stand of {path} is usable on this network"
+            + (f" ({len(reading.dropped)} dropped: {why})" if why else "")
+        )
+    reading.stand_set(network).check_fleet(vehicles)
+    return reading
 
 
 def _describe(space: RoadSpace, network: CompiledNetwork, position: NetPosition) -> dict[str, Any]:

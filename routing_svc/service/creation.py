@@ -132,9 +132,6 @@ def build_stands(
         raise InvalidInput(
             f"{len(reading.dropped)} stands are unusable on network {entry.id!r}: {off}"
         )
-    positions = reading.positions(entry.network)
-    stands = StandSet.merged(
-        [(p, s.capacity) for p, s in zip(positions, reading.usable, strict=True)]
-    )
+    stands = reading.stand_set(entry.network)
     stands.check_fleet(vehicles)
     return stands

@@ -168,6 +168,17 @@ class VehicleAnswer(Answer):
     updates: int
 
 
+class StandAnswer(Answer):
+    """A stand of a fleet: where it is, how many vehicles it holds, whose reference is at it."""
+
+    position: DescribedPosition
+    capacity: int
+    vehicles: list[str] = Field(
+        description="The ids of the vehicles whose stand it is: the nearest stand with free "
+        "capacity to each reference, nearest pairs first."
+    )
+
+
 class FleetAnswer(Answer):
     """A fleet: its configuration, version, target count and vehicles."""
 
@@ -187,6 +198,10 @@ class FleetAnswer(Answer):
     targets: int
     vehicles: list[VehicleAnswer]
     reference_demand: dict[str, Any] | None
+    stands: list[StandAnswer] | None = Field(
+        description="The stands the vehicles park at (stands at one position merged, their "
+        "capacities added), each with the vehicles at it; null: vehicles park anywhere.",
+    )
 
 
 class FleetList(Answer):

@@ -317,7 +317,23 @@ class FleetRuntime:
             "targets": self.fleet.state.targets,
             "vehicles": [self._vehicle_view(i) for i in range(len(self.fleet.vehicles))],
             "reference_demand": None if self.reference is None else self.reference["demand"],
+            "stands": self._stands_view(),
         }
+
+    def _stands_view(self) -> list[dict[str, Any]] | None:
+        """Each stand as the API shows it: its ``position``, ``capacity`` and the ids of the
+        ``vehicles`` whose reference is at it (:meth:`Fleet.stands`); ``None`` without
+        stands."""
+        stands = self.fleet.config.stands
+        if stands is None:
+            return None
+        at: dict[NetPosition, list[str]] = {p: [] for p in stands.positions}
+        for vehicle_id, position in self.fleet.stands().items():
+            at[position].append(vehicle_id)
+        return [
+            {"position": self.entry.describe(p), "capacity": c, "vehicles": at[p]}
+            for p, c in zip(stands.positions, stands.capacities, strict=True)
+        ]
 
     def _vehicle_view(self, index: int) -> dict[str, Any]:
         """A vehicle as the API shows it: its reference (``position``, what learning

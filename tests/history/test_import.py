@@ -130,7 +130,7 @@ def test_refuse_on_the_command_line_exits_2_with_the_lines(
         "skip",
     )
     assert created.returncode == 0, created.stderr
-    assert [r["line"] for r in json.loads(created.stdout)["bad_rows"]] == [3, 5, 9]
+    assert [r["line"] for r in json.loads(created.stdout)["bad_rows"]] == [3, 5, 7, 9]
     out = cli("history", "import", str(path), "--fleet", "f", "--db", db, "--quiet")
     assert out.returncode == 2
     assert all(f"line {n}:" in out.stderr for n in (3, 5, 7, 9))
@@ -191,12 +191,12 @@ def test_a_live_server_creates_the_fleet_the_process_creates_skipping_the_same_r
     remote = [*create, "--net", "drt", "--service-url", url]
     refused = cli(*remote)
     assert refused.returncode == 2
-    assert all(f"line {n}:" in refused.stderr for n in (3, 5, 9))
+    assert all(f"line {n}:" in refused.stderr for n in (3, 5, 7, 9))
     assert httpx.get(f"{url}/v1/fleets/f").status_code == 404  # nothing was created
     skipped = cli(*remote, "--on-bad-row", "skip")
     assert skipped.returncode == 0, skipped.stderr
-    # the same rows are left out (required types are not checked when a fleet is created),
-    # so the same sample gives the same fleet
+    # the same rows are left out (line 7 requires a type the new fleet lacks), so the same
+    # sample gives the same fleet
     lines = [[r["line"] for r in json.loads(out.stdout)["bad_rows"]] for out in (skipped, local)]
-    assert lines == [[3, 5, 9], [3, 5, 9]]
+    assert lines == [[3, 5, 7, 9], [3, 5, 7, 9]]
     assert json.loads(skipped.stdout)["vehicles"] == json.loads(local.stdout)["vehicles"]

@@ -144,3 +144,12 @@ def test_the_stands_command(tmp_path: Path) -> None:
     )
     assert wrong.returncode == 2
     assert re.search(r"not a SUMO additional file", wrong.stderr)
+    missing = subprocess.run(
+        [*command[:4], str(tmp_path / "none.add.xml"), "--net", "drt"],
+        capture_output=True,
+        text=True,
+    )
+    assert missing.returncode == 2
+    assert missing.stderr.splitlines() == [
+        f"routing-svc stands: invalid input: no stands file at {tmp_path / 'none.add.xml'}"
+    ]
