@@ -44,6 +44,9 @@ from routing_svc.service.reference import build_demand, expected_cost_now
 from routing_svc.service.service_levels import DEFAULT_THRESHOLDS, ServiceLevels
 from routing_svc.types import NetPosition
 
+SNAPSHOT_POSITIONS = 512
+"""Positions a snapshot holds at the base cadence (:meth:`FleetRuntime.snapshot_every`)."""
+
 
 class FleetRuntime:
     """The in-memory state of one fleet, advanced only by events."""
@@ -277,6 +280,15 @@ class FleetRuntime:
                 "service_levels": self.levels.to_dict(),
             }
         )
+
+    def snapshot_every(self, base: int) -> int:
+        """Versions between two stored snapshots: ``base`` for a snapshot of up to
+        :data:`SNAPSHOT_POSITIONS` positions, a multiple of it for one that holds more (a
+        ``consolidating`` fleet's reservoir), so that writing snapshots costs no more per
+        target than a small fleet's, and a restart replays at most that many events."""
+        policy = self.fleet.config.consolidation
+        held = len(self.fleet.vehicles) + (0 if policy is None else policy.reservoir)
+        return base * max(1, -(-held // SNAPSHOT_POSITIONS))
 
     def restore(self, snapshot_json: str) -> bool:
         """Load :meth:`snapshot_json` output; ``False`` (nothing loaded) for a snapshot

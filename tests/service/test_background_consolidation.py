@@ -105,3 +105,29 @@ def test_a_consolidation_solved_off_the_write_path_is_applied_later_and_replayed
     report = replay_report(sqlite_url, tmp_path, capsys)
     assert report["ok"] is True
     assert {f["fleet"] for f in report["fleets"] if f["ok"]} == {"steady", "restarted"}
+
+
+def test_a_consolidating_fleet_stores_its_larger_snapshot_less_often(tmp_path: Path) -> None:
+    client = start(f"sqlite:///{tmp_path / 'events.db'}", tmp_path)
+    try:
+        for fleet_id, rule in (("held", "consolidating"), ("small", "probe")):
+            r = client.post("/v1/fleets", json=fleet_body(fleet_id, rule=rule))
+            assert r.status_code == 201, r.text
+        targets = target_stream(600)
+        log = client.app.state.fleets.log  # type: ignore[attr-defined]
+        seen: dict[str, set[int | None]] = {"held": set(), "small": set()}
+        for start_at in range(0, 600, 25):
+            for fleet_id in seen:
+                r = client.post(
+                    f"/v1/fleets/{fleet_id}/targets:batch",
+                    json={"targets": targets[start_at : start_at + 25]},
+                )
+                assert r.status_code == 200, r.text
+                seen[fleet_id].add(log.get_fleet(fleet_id).snapshot_version)
+        # versions 26, 51, ...: a snapshot where a batch crossed a multiple of the cadence
+        assert seen["small"] == {None, *(v for v in range(76, 602, 25) if v % 64 < 25)}
+        assert seen["held"] == {None, 526}
+        report = client.app.state.fleets.verify("held")  # type: ignore[attr-defined]
+        assert report["snapshot_identical"] is True
+    finally:
+        client.__exit__(None, None, None)

@@ -26,7 +26,7 @@ from routing_svc.service.app import create_app
 from tests.helpers import DRT, make_settings
 
 NET = load_network(DRT)
-CHUNK = 50  # snapshots are stored when the version crosses a multiple of 64
+CHUNK = 50  # a consolidating fleet's snapshot is stored when its version crosses 512
 
 
 def fleet_body(fleet_id: str, **extra: Any) -> dict[str, Any]:
@@ -136,9 +136,9 @@ def test_consolidations_are_recorded_survive_a_restart_and_replay(
         if record["accepted"]:
             assert sum(record["updates"]) == record["sample"]
 
-    # the same targets, with a restart just after the consolidation of target 500: the
-    # last snapshot is at version 451, so the restart replays events 452..501 and applies
-    # the recorded consolidation of seq 501 (if any) without solving it again
+    # the same targets, with a restart just after the consolidation of target 500: no
+    # snapshot yet (the first at version 512), so the restart replays events 2..501 and
+    # applies the recorded consolidations of seq 251 and 501 without solving them again
     head = post_all(client, "restarted", targets[:500])
     assert [r["seq"] for r in head] == list(range(2, 502))
     assert head == steady[:500]

@@ -68,7 +68,8 @@ from routing_svc.store import EventLog, EventRecord, FleetGroup, GroupItem, NewE
 __all__ = ["SNAPSHOT_EVERY", "FleetRuntimes", "GroupCommit"]
 
 SNAPSHOT_EVERY = 64
-"""A snapshot of the state is stored whenever the version crosses a multiple of this."""
+"""A snapshot of a small fleet's state is stored whenever its version crosses a multiple
+of this (:meth:`~routing_svc.service.runtime.FleetRuntime.snapshot_every`)."""
 
 COMMIT_GROUP_SIZE = Histogram(
     "routing_svc_commit_group_size",
@@ -144,7 +145,8 @@ class _FleetShare:
         return out
 
     def snapshot(self, version: int) -> str | None:
-        due = version // SNAPSHOT_EVERY != self.before // SNAPSHOT_EVERY
+        every = self.runtime.snapshot_every(SNAPSHOT_EVERY)
+        due = version // every != self.before // every
         return self.runtime.snapshot_json() if due else None
 
     def request(self) -> FleetGroup:
