@@ -11,17 +11,21 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from concurrent.futures import Future
 from pathlib import Path
 from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
 
+from routing_svc.network import RoadSpace
+from routing_svc.sa import Fleet, Objective, Vehicle, learning_config
 from routing_svc.sa.consolidation import ConsolidationPolicy
 from routing_svc.service import replay_command
 from routing_svc.service.app import create_app
+from routing_svc.service.background_solver import PendingConsolidation
 from tests.helpers import make_settings
-from tests.service.test_consolidating_replay import fleet_body, post_all, target_stream
+from tests.service.test_consolidating_replay import NET, fleet_body, post_all, target_stream
 
 FIRST = ConsolidationPolicy().first
 PATIENCE_S = 120.0
@@ -131,3 +135,22 @@ def test_a_consolidating_fleet_stores_its_larger_snapshot_less_often(tmp_path: P
         assert report["snapshot_identical"] is True
     finally:
         client.__exit__(None, None, None)
+
+
+def test_a_solve_that_failed_in_its_worker_is_solved_on_the_write_path() -> None:
+    space = RoadSpace(NET)
+    config = learning_config(
+        "consolidating", typical_cost=space.typical_cost(), n_vehicles=3, objective=Objective(1.0)
+    )
+    starts = [space.decode(t["position"]) for t in target_stream(3)]
+    fleet = Fleet.create(space, [(Vehicle(f"v{i}"), p) for i, p in enumerate(starts)], config)
+    fleet.defer_consolidations = True
+    for body in target_stream(FIRST):
+        fleet.observe(space.decode(body["position"]))
+    job = fleet.consolidation_job()
+    assert job is not None
+    answer: Future[Any] = Future()
+    pending = PendingConsolidation(job, answer)
+    assert pending.solved() is None  # not finished yet
+    answer.set_exception(RuntimeError("the worker died"))
+    assert pending.solved() == (job.key, job.solve())
