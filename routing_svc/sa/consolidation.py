@@ -171,6 +171,12 @@ class ConsolidationPolicy:
         period = math.ceil((now - epoch) * (self.growth - 1.0))
         return now + min(max(period, self.first), self.longest)
 
+    def apply_by(self, *, due: int, epoch: int) -> int:
+        """The target count by which a consolidation that fell due at ``due`` and is
+        solved away from the fleet must be applied: half the period that would follow
+        it, so that however fast targets come the schedule keeps its shape."""
+        return due + (self.next_after(now=due, epoch=epoch) - due) // 2
+
 
 @dataclass(frozen=True, slots=True)
 class Consolidation(Generic[P]):
@@ -426,6 +432,8 @@ class ConsolidationJob(Generic[P]):
     :func:`consolidate`."""
 
     key: ConsolidationKey
+    apply_by: int
+    """The target count by which it is applied (:meth:`ConsolidationPolicy.apply_by`)."""
     space: SampleSpace[P]
     positions: tuple[P, ...]
     anchor: tuple[P, ...]

@@ -711,6 +711,7 @@ class Fleet(Generic[P]):
             return None
         return ConsolidationJob(
             key=key,
+            apply_by=policy.apply_by(due=learning.next_consolidation, epoch=learning.epoch),
             space=cast(SampleSpace[P], self.space),
             positions=tuple(state.positions),
             anchor=tuple(learning.anchor),

@@ -8,6 +8,9 @@ worker process (:meth:`ConsolidationSolver.submit`) and keeps serving with the
 references it has; the first target of the fleet after the solve finished applies
 it, if it is still the due one, and that target's event records it, so that replay
 applies it at the same place without solving (:mod:`routing_svc.service.runtime`).
+Targets that come faster than it is solved wait for it once half the period that
+follows it has passed (:meth:`~routing_svc.sa.consolidation.ConsolidationPolicy.apply_by`),
+so that a burst of targets does not outrun the schedule.
 
 Processes, not threads: the solve (scipy's Dijkstra, the compiled interchange) holds
 the GIL, and a thread would stall the write path as much as solving inline.
@@ -27,6 +30,9 @@ from routing_svc.sa.consolidation import Consolidation, ConsolidationJob, Consol
 from routing_svc.sa.space import P
 
 logger = logging.getLogger(__name__)
+
+LONGEST_WAIT_S = 120.0
+"""How long a target waits for a consolidation it must apply before solving it itself."""
 
 
 def _solve(job: ConsolidationJob[P]) -> Consolidation[P]:
@@ -84,13 +90,15 @@ class PendingConsolidation(Generic[P]):
     def key(self) -> ConsolidationKey:
         return self.job.key
 
-    def solved(self) -> tuple[ConsolidationKey, Consolidation[P]] | None:
-        """The answer when it is ready (``None`` before). A solve that failed in the
-        worker is solved here, so that it fails, if it must, as it would inline."""
-        if not self.answer.done():
+    def solved(self, targets: int) -> tuple[ConsolidationKey, Consolidation[P]] | None:
+        """The answer when it is ready (``None`` before), waited for once the fleet has
+        seen ``targets >= job.apply_by``. A solve that failed in the worker, or takes
+        longer than :data:`LONGEST_WAIT_S` then, is solved here, so that it fails, if it
+        must, as it would inline."""
+        if not self.answer.done() and targets < self.job.apply_by:
             return None
         try:
-            return self.key, self.answer.result()
+            return self.key, self.answer.result(timeout=LONGEST_WAIT_S)
         except Exception:
             logger.exception("a consolidation failed in its worker; solving it on the write path")
             return self.key, self.job.solve()

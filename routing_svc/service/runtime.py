@@ -113,7 +113,8 @@ class FleetRuntime:
         if replaying:
             outcome = self.fleet.replay_observe(target, requires, recorded)
         else:
-            solved = None if self._pending is None else self._pending.solved()
+            pending = self._pending
+            solved = None if pending is None else pending.solved(self.fleet.state.targets)
             outcome = self.fleet.observe(target, requires, solved=solved)
             self._hand_over_due()
         seq = self.version + 1

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import threading
 import time
 from concurrent.futures import Future
 from pathlib import Path
@@ -149,8 +150,15 @@ def test_a_solve_that_failed_in_its_worker_is_solved_on_the_write_path() -> None
         fleet.observe(space.decode(body["position"]))
     job = fleet.consolidation_job()
     assert job is not None
+    # due at the 250th target: applied by half the period after it (250 -> 500) at the latest
+    assert job.key == (0, FIRST) and job.apply_by == FIRST + FIRST // 2
     answer: Future[Any] = Future()
     pending = PendingConsolidation(job, answer)
-    assert pending.solved() is None  # not finished yet
+    assert pending.solved(job.apply_by - 1) is None  # not finished, not late: the target goes on
     answer.set_exception(RuntimeError("the worker died"))
-    assert pending.solved() == (job.key, job.solve())
+    assert pending.solved(job.apply_by - 1) == (job.key, job.solve())
+    # once late, a target waits for the answer
+    later: Future[Any] = Future()
+    done = job.solve()
+    threading.Timer(0.3, later.set_result, args=(done,)).start()
+    assert PendingConsolidation(job, later).solved(job.apply_by) == (job.key, done)
