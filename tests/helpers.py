@@ -34,6 +34,7 @@ import httpx
 import numpy as np
 from prometheus_client import REGISTRY
 
+from routing_svc.demand.network import hotspot_mixture
 from routing_svc.errors import RoutingSvcError
 from routing_svc.network import RoadSpace, load_network
 from routing_svc.network.catalogue import resolve_network
@@ -229,6 +230,43 @@ def target_stream(seed: int, n: int) -> list[dict[str, Any]]:
         offset = float(rng.uniform(0.0, float(NET.length[int(e)])))
         out.append({"position": {"edge": edge(int(e)), "offset": offset}})
     return out
+
+
+def spread_fleet_body(fleet_id: str, **extra: Any) -> dict[str, Any]:
+    """A ``POST /v1/fleets`` body: four vehicles spread over DRT, plus ``extra`` fields."""
+    body: dict[str, Any] = {
+        "id": fleet_id,
+        "network": "drt",
+        "vehicles": [
+            {"id": f"v{i}", "position": {"edge": edge(e), "offset": 0.0}}
+            for i, e in enumerate((0, 100, 300, 500))
+        ],
+    }
+    body.update(extra)
+    return body
+
+
+def hotspot_stream(n: int) -> list[dict[str, Any]]:
+    """``n`` target bodies drawn from one three-hotspot demand on DRT (the same every call)."""
+    demand = hotspot_mixture(NET, centres=3, rng=np.random.default_rng(21))
+    return [
+        {"position": {"edge": edge(z.edge), "offset": z.offset}}
+        for z in demand.sample(np.random.default_rng(22), n)
+    ]
+
+
+def post_batches(
+    client: Any, fleet_id: str, targets: list[dict[str, Any]], chunk: int = 50
+) -> list[Any]:
+    """Post ``targets`` through ``targets:batch``, ``chunk`` a request; every result."""
+    results: list[Any] = []
+    for start in range(0, len(targets), chunk):
+        r = client.post(
+            f"/v1/fleets/{fleet_id}/targets:batch", json={"targets": targets[start : start + chunk]}
+        )
+        assert r.status_code == 200, r.text
+        results.extend(r.json()["results"])
+    return results
 
 
 def replay_ok(db_url: str, tmp_path: Any) -> dict[str, Any]:

@@ -25,8 +25,7 @@ from routing_svc.sa.consolidation import ConsolidationPolicy
 from routing_svc.service import replay_command
 from routing_svc.service.app import create_app
 from routing_svc.service.background_solver import PendingConsolidation
-from tests.helpers import make_settings
-from tests.service.test_consolidating_replay import NET, fleet_body, post_all, target_stream
+from tests.helpers import NET, hotspot_stream, make_settings, post_batches, spread_fleet_body
 
 FIRST = ConsolidationPolicy().first
 PATIENCE_S = 120.0
@@ -71,14 +70,14 @@ def test_a_consolidation_solved_off_the_write_path_is_applied_later_and_replayed
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     sqlite_url = f"sqlite:///{tmp_path / 'events.db'}"
-    targets = target_stream(FIRST + 400)
+    targets = hotspot_stream(FIRST + 400)
     client = start(sqlite_url, tmp_path)
     try:
         assert client.app.state.fleets.solver is not None  # type: ignore[attr-defined]
         for fleet_id in ("steady", "restarted"):
-            r = client.post("/v1/fleets", json=fleet_body(fleet_id))
+            r = client.post("/v1/fleets", json=spread_fleet_body(fleet_id))
             assert r.status_code == 201, r.text
-        head = post_all(client, "steady", targets[:FIRST])
+        head = post_batches(client, "steady", targets[:FIRST])
         # the 250th target (seq 251) made it due: none is solved inside a target
         assert not any("consolidated" in r for r in head)
         result, _ = post_until_consolidated(client, "steady", targets[FIRST:])
@@ -93,7 +92,7 @@ def test_a_consolidation_solved_off_the_write_path_is_applied_later_and_replayed
                 (v["position"]["edge"], v["position"]["offset"]) for v in fleet["vehicles"]
             ] == [(p["edge"], p["offset"]) for p in record["positions"]]
         # a restart while the consolidation is being solved: it is solved again
-        post_all(client, "restarted", targets[:FIRST])
+        post_batches(client, "restarted", targets[:FIRST])
     finally:
         client.__exit__(None, None, None)
     client = start(sqlite_url, tmp_path)
@@ -116,9 +115,9 @@ def test_a_consolidating_fleet_stores_its_larger_snapshot_less_often(tmp_path: P
     client = start(f"sqlite:///{tmp_path / 'events.db'}", tmp_path)
     try:
         for fleet_id, rule in (("held", "consolidating"), ("small", "probe")):
-            r = client.post("/v1/fleets", json=fleet_body(fleet_id, rule=rule))
+            r = client.post("/v1/fleets", json=spread_fleet_body(fleet_id, rule=rule))
             assert r.status_code == 201, r.text
-        targets = target_stream(600)
+        targets = hotspot_stream(600)
         log = client.app.state.fleets.log  # type: ignore[attr-defined]
         seen: dict[str, set[int | None]] = {"held": set(), "small": set()}
         for start_at in range(0, 600, 25):
@@ -143,10 +142,10 @@ def test_a_solve_that_failed_in_its_worker_is_solved_on_the_write_path() -> None
     config = learning_config(
         "consolidating", typical_cost=space.typical_cost(), n_vehicles=3, objective=Objective(1.0)
     )
-    starts = [space.decode(t["position"]) for t in target_stream(3)]
+    starts = [space.decode(t["position"]) for t in hotspot_stream(3)]
     fleet = Fleet.create(space, [(Vehicle(f"v{i}"), p) for i, p in enumerate(starts)], config)
     fleet.defer_consolidations = True
-    for body in target_stream(FIRST):
+    for body in hotspot_stream(FIRST):
         fleet.observe(space.decode(body["position"]))
     job = fleet.consolidation_job()
     assert job is not None

@@ -15,50 +15,12 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from routing_svc.demand.network import hotspot_mixture
-from routing_svc.network import load_network
 from routing_svc.service import replay_command
 from routing_svc.service.app import create_app
-from tests.helpers import DRT, make_settings
-
-NET = load_network(DRT)
-CHUNK = 50  # a consolidating fleet's snapshot is stored when its version crosses 512
-
-
-def fleet_body(fleet_id: str, **extra: Any) -> dict[str, Any]:
-    body: dict[str, Any] = {
-        "id": fleet_id,
-        "network": "drt",
-        "vehicles": [
-            {"id": f"v{i}", "position": {"edge": NET.edge_ids[e], "offset": 0.0}}
-            for i, e in enumerate((0, 100, 300, 500))
-        ],
-    }
-    body.update(extra)
-    return body
-
-
-def target_stream(n: int) -> list[dict[str, Any]]:
-    demand = hotspot_mixture(NET, centres=3, rng=np.random.default_rng(21))
-    return [
-        {"position": {"edge": NET.edge_ids[z.edge], "offset": z.offset}}
-        for z in demand.sample(np.random.default_rng(22), n)
-    ]
-
-
-def post_all(client: TestClient, fleet_id: str, targets: list[dict[str, Any]]) -> list[Any]:
-    results: list[Any] = []
-    for start in range(0, len(targets), CHUNK):
-        r = client.post(
-            f"/v1/fleets/{fleet_id}/targets:batch", json={"targets": targets[start : start + CHUNK]}
-        )
-        assert r.status_code == 200, r.text
-        results.extend(r.json()["results"])
-    return results
+from tests.helpers import hotspot_stream, make_settings, post_batches, spread_fleet_body
 
 
 class Service:
@@ -115,13 +77,13 @@ def test_consolidations_are_recorded_survive_a_restart_and_replay(
 ) -> None:
     client = service.client
     assert client is not None
-    targets = target_stream(600)
+    targets = hotspot_stream(600)
     for fleet_id in ("steady", "restarted"):
-        created = client.post("/v1/fleets", json=fleet_body(fleet_id))
+        created = client.post("/v1/fleets", json=spread_fleet_body(fleet_id))
         assert created.status_code == 201, created.text
         assert created.json()["rule"] == "consolidating"
 
-    steady = post_all(client, "steady", targets)
+    steady = post_batches(client, "steady", targets)
     assert [r["seq"] for r in steady] == list(range(2, 602))
     consolidated = [r for r in steady if "consolidated" in r]
     # due at the 250th target (seq 251) and the 500th (seq 501): this stationary stream
@@ -139,7 +101,7 @@ def test_consolidations_are_recorded_survive_a_restart_and_replay(
     # the same targets, with a restart just after the consolidation of target 500: no
     # snapshot yet (the first at version 512), so the restart replays events 2..501 and
     # applies the recorded consolidations of seq 251 and 501 without solving them again
-    head = post_all(client, "restarted", targets[:500])
+    head = post_batches(client, "restarted", targets[:500])
     assert [r["seq"] for r in head] == list(range(2, 502))
     assert head == steady[:500]
     before = client.get("/v1/fleets/restarted")
@@ -158,7 +120,7 @@ def test_consolidations_are_recorded_survive_a_restart_and_replay(
         updates = {v["id"]: v["updates"] for v in before.json()["vehicles"]}
         assert client.get("/v1/fleets/restarted/metrics").json()["updates"] == updates
 
-    tail = post_all(client, "restarted", targets[500:])
+    tail = post_batches(client, "restarted", targets[500:])
     assert tail == steady[500:]
     restarted = client.get("/v1/fleets/restarted").json()
     reference = client.get("/v1/fleets/steady").json()
@@ -181,11 +143,11 @@ def test_consolidations_are_recorded_survive_a_restart_and_replay(
 def test_a_consolidating_fleet_takes_no_annealing(service: Service) -> None:
     client = service.client
     assert client is not None
-    assert client.post("/v1/fleets", json=fleet_body("kept")).status_code == 201
+    assert client.post("/v1/fleets", json=spread_fleet_body("kept")).status_code == 201
     kept = client.get("/v1/fleets/kept").content
     noisy = {"rule": "consolidating", "annealing": {"scale": 5.0}}
     for fleet_id in ("noisy", "kept"):
-        r = client.post("/v1/fleets", json=fleet_body(fleet_id, **noisy))
+        r = client.post("/v1/fleets", json=spread_fleet_body(fleet_id, **noisy))
         assert r.status_code == 422, r.text
         assert r.headers["content-type"] == "application/problem+json"
     assert client.get("/v1/fleets/noisy").status_code == 404

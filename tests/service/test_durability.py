@@ -11,6 +11,11 @@ import httpx
 
 from tests.helpers import LiveServer, fleet_body, replay_ok, targets
 
+PER_CLIENT = 70
+"""8 clients: 560 targets, past the consolidations due at 250 and 375 (each solved by the
+worker process of the server process that made it due) and the consolidating fleet's
+first snapshot at version 512."""
+
 
 def test_concurrent_posts_two_workers(
     live_server: Callable[..., LiveServer], db_url: str, tmp_path: Any
@@ -23,7 +28,7 @@ def test_concurrent_posts_two_workers(
 
     def client(worker: int) -> None:
         with httpx.Client(base_url=server.url, timeout=30) as http:
-            for t in targets(worker, 25):
+            for t in targets(worker, PER_CLIENT):
                 sent = time.monotonic()
                 r = http.post("/v1/fleets/f1/targets", json=t)
                 done = time.monotonic()
@@ -40,13 +45,24 @@ def test_concurrent_posts_two_workers(
         th.join()
     assert errors == []
     seqs = sorted(s for _, _, s in acked)
-    assert seqs == list(range(2, 2 + 8 * 25))
+    assert seqs == list(range(2, 2 + 8 * PER_CLIENT))
     # linearizable order: a target sent after another was acknowledged gets a later seq
     for sent, _, seq in acked:
         earlier = [s for _, d, s in acked if d < sent]
         assert all(seq > s for s in earlier)
     fleet = httpx.get(server.url + "/v1/fleets/f1").json()
-    assert fleet["version"] == 1 + 8 * 25
+    assert fleet["version"] == 1 + 8 * PER_CLIENT
+    events = httpx.get(server.url + "/v1/fleets/f1/events", params={"limit": 1000}).json()
+    applied = [
+        e["result"]["consolidated"] for e in events["items"][1:] if "consolidated" in e["result"]
+    ]
+    # the one due at the 250th target, solved by a worker process of the server process
+    # that saw it due (on the reservoir it then had), applied once, by the 376th at the
+    # latest; the next is due at least 250 targets later
+    samples = [c["sample"] for c in applied]
+    assert 1 <= len(samples) <= 2 and 250 <= samples[0] <= 375, applied
+    assert samples == sorted(set(samples))
+    assert applied_at[0]["seq"] <= 1 + 376
     report = replay_ok(db_url, tmp_path)
     assert report["fleets"][0]["snapshot_identical"] is True
 
