@@ -20,7 +20,9 @@ from __future__ import annotations
 
 import logging
 import multiprocessing
+import os
 import threading
+import time
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -31,12 +33,27 @@ from routing_svc.sa.space import P
 
 logger = logging.getLogger(__name__)
 
+PARENT_CHECK_S = 1.0
+"""How often a worker checks that its service process is still there."""
+
 LONGEST_WAIT_S = 120.0
 """How long a target waits for a consolidation it must apply before solving it itself."""
 
 
 def _solve(job: ConsolidationJob[P]) -> Consolidation[P]:
     return job.solve()
+
+
+def _exit_with(parent: int) -> None:
+    """Run in each worker: leave as soon as the service process is gone (a ``kill -9``
+    gives the worker no other sign), so that no worker outlives its service."""
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(PARENT_CHECK_S)
+        os._exit(0)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
 
 
 class ConsolidationSolver:
@@ -61,7 +78,10 @@ class ConsolidationSolver:
             for _ in range(2):
                 if self._pool is None:
                     self._pool = ProcessPoolExecutor(
-                        self.workers, mp_context=multiprocessing.get_context("spawn")
+                        self.workers,
+                        mp_context=multiprocessing.get_context("spawn"),
+                        initializer=_exit_with,
+                        initargs=(os.getpid(),),
                     )
                 try:
                     return self._pool.submit(_solve, job)

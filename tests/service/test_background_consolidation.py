@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import signal
 import threading
 import time
 from concurrent.futures import Future
 from pathlib import Path
 from typing import Any
 
+import httpx
 import pytest
 from fastapi.testclient import TestClient
 
@@ -25,7 +28,14 @@ from routing_svc.sa.consolidation import ConsolidationPolicy
 from routing_svc.service import replay_command
 from routing_svc.service.app import create_app
 from routing_svc.service.background_solver import PendingConsolidation
-from tests.helpers import NET, hotspot_stream, make_settings, post_batches, spread_fleet_body
+from tests.helpers import (
+    NET,
+    LiveServer,
+    hotspot_stream,
+    make_settings,
+    post_batches,
+    spread_fleet_body,
+)
 
 FIRST = ConsolidationPolicy().first
 PATIENCE_S = 120.0
@@ -161,3 +171,49 @@ def test_a_solve_that_failed_in_its_worker_is_solved_on_the_write_path() -> None
     done = job.solve()
     threading.Timer(0.3, later.set_result, args=(done,)).start()
     assert PendingConsolidation(job, later).solved(job.apply_by) == (job.key, done)
+
+
+def children(pid: int) -> list[int]:
+    """The live processes whose parent is ``pid`` (from ``/proc``)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid and fields[0] != "Z":
+            found.append(int(stat.parent.name))
+    return found
+
+
+def alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def test_no_worker_outlives_its_service_process(tmp_path: Path) -> None:
+    server = LiveServer(f"sqlite:///{tmp_path / 'events.db'}", tmp_path).start()
+    assert server.process is not None
+    workers: list[int] = []
+    try:
+        httpx.post(server.url + "/v1/fleets", json=spread_fleet_body("f")).raise_for_status()
+        body = {"targets": hotspot_stream(FIRST + 10)}
+        httpx.post(server.url + "/v1/fleets/f/targets:batch", json=body, timeout=60)
+        deadline = time.monotonic() + PATIENCE_S
+        while not (workers := children(server.process.pid)):  # the solver started
+            assert time.monotonic() < deadline, "no worker process started"
+            time.sleep(0.1)
+        os.kill(server.process.pid, signal.SIGKILL)  # the service only, not its group
+        server.process.wait(timeout=60)
+        deadline = time.monotonic() + PATIENCE_S
+        while any(alive(w) for w in workers):
+            assert time.monotonic() < deadline, "a worker outlived its service"
+            time.sleep(0.1)
+    finally:
+        for w in workers:
+            if alive(w):
+                os.kill(w, signal.SIGKILL)
+        server.stop()
