@@ -30,12 +30,10 @@ def parking_areas(path: Path) -> dict[str, tuple[str, float]]:
     return areas
 
 
-@pytest.fixture(scope="module")
-def run(tmp_path_factory: pytest.TempPathFactory) -> tuple[CosimResult, Path]:
-    """``sa`` with 3 vehicles, 5 minutes of requests around one hotspot (short rides),
-    the parking file's stands; the stands are recorded every 10 simulated seconds."""
-    out = tmp_path_factory.mktemp("stands")
-    spec = CosimSpec(
+def small(policies: str) -> CosimSpec:
+    """3 vehicles, 5 minutes of requests around one hotspot (short rides), the parking
+    file's stands; the stands are recorded every 10 simulated seconds."""
+    return CosimSpec(
         network=str(BAD_HERSFELD),
         vehicles=3,
         duration=300.0,
@@ -46,13 +44,24 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> tuple[CosimResult, Path]:
         ride_radius=500.0,
         history=30,
         density=2.0,
-        policies=parse_policies("sa"),
+        policies=parse_policies(policies),
         seeds=(0,),
         workers=1,
         snapshot_period=10.0,
         stands=str(PARKING),
     )
-    return run_cosim(spec, out_dir=out, progress=False), out
+
+
+def fleet_stops(path: Path) -> list[dict[str, str]]:
+    """The fleet's stops in SUMO's stop output, in its order."""
+    stops = ElementTree.parse(path).getroot().iter("stopinfo")
+    return [dict(s.attrib) for s in stops if s.get("id", "").startswith("fleet")]
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> tuple[CosimResult, Path]:
+    out = tmp_path_factory.mktemp("stands")
+    return run_cosim(small("sa"), out_dir=out, progress=False), out
 
 
 def test_idle_vehicles_park_in_their_stands_and_requests_are_served(
@@ -61,12 +70,7 @@ def test_idle_vehicles_park_in_their_stands_and_requests_are_served(
     result, out = run
     areas = parking_areas(PARKING)
     (sa,) = result.runs
-    stops = [
-        s.attrib
-        for s in ElementTree.parse(out / "seed0" / "stops-sa.xml").getroot().iter("stopinfo")
-        if s.get("id", "").startswith("fleet")
-    ]
-    parked = [s for s in stops if s.get("parkingArea")]
+    parked = [s for s in fleet_stops(out / "seed0" / "stops-sa.xml") if s.get("parkingArea")]
     assert parked, "no fleet vehicle parked in a parkingArea"
     assert {s["parkingArea"] for s in parked} <= set(areas)
     # every reference the fleet gave its vehicles is a stand of the file
@@ -102,6 +106,28 @@ def test_the_summary_names_the_stands_file(run: tuple[CosimResult, Path]) -> Non
     assert summary["stands"]["usable"] == usable > 0
     assert summary["spec"]["stands"] == str(PARKING)
     assert summary["policies"]["sa"]["unparked"] == 0
+
+
+def test_sumo_taxistand_parks_at_the_stands_of_the_file(tmp_path: Path) -> None:
+    """Taxis start in the parkingAreas of the optimum over the stands and go back to them."""
+    result = run_cosim(small("sumo-taxistand"), out_dir=tmp_path, progress=False)
+    areas = parking_areas(PARKING)
+    stand_places = {(edge, round(middle, 6)) for edge, middle in areas.values()}
+    optimum, prepared = result.optimum[0], result.prepared
+    assert optimum is not None and prepared is not None
+    edges = prepared.network.edge_ids
+    sites = {(edges[p.edge], round(p.offset, 6)) for p in optimum.positions}
+    assert sites <= stand_places
+    parked = [
+        s
+        for s in fleet_stops(tmp_path / "seed0" / "stops-sumo-taxistand.xml")
+        if s.get("parkingArea")
+    ]
+    assert {s["parkingArea"] for s in parked} <= set(areas)
+    first = {s["id"]: s["parkingArea"] for s in reversed(parked)}
+    assert {(areas[a][0], round(areas[a][1], 6)) for a in first.values()} == sites
+    assert any(float(s["started"]) > result.spec.warmup for s in parked)
+    assert result.runs[0].served >= 1
 
 
 def cosim(*args: str) -> subprocess.CompletedProcess[str]:
