@@ -9,6 +9,9 @@ own policies run with its ``greedy`` dispatcher and nothing in the loop
 (``sumo-taxistand`` with taxi stands at its start sites). Either way every
 wait is read from SUMO's tripinfo output afterwards, and the fleet's load is
 sampled from SUMO's taxi states (:class:`~routing_svc.sim.measures.FleetLoad`).
+With stands (a parkingArea file), a run that uses them loads the file and
+writes SUMO's stop output ``stops-<policy>.xml``, where every parking stop
+names its parkingArea.
 """
 
 from __future__ import annotations

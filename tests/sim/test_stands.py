@@ -159,3 +159,34 @@ def test_a_bad_stands_file_is_a_one_line_error(
     assert len(done.stderr.strip().splitlines()) == 1
     assert message in done.stderr
     assert not out.exists()
+
+
+def test_stand_homes_fill_parking_areas_at_one_stand_in_vehicle_order() -> None:
+    """Two parkingAreas at one position are one stand of capacity 3 for the service;
+    its vehicles, by id, fill the first parkingArea (room for 1), then the second."""
+    from routing_svc.network import load_network
+    from routing_svc.network.stands import Stand
+    from routing_svc.service.inprocess import InProcessFleetClient
+    from routing_svc.sim.dispatcher import stand_homes
+
+    network = load_network(BAD_HERSFELD)
+    edge = max(range(network.n_edges), key=lambda i: float(network.length[i]))
+    name, middle = network.edge_ids[edge], float(network.length[edge]) / 2.0
+    areas = [Stand("a", name, middle, 1), Stand("b", name, middle, 2)]
+    with InProcessFleetClient() as client:
+        network_id = str(client.add_network(BAD_HERSFELD, name="bh")["id"])
+        vehicles = [{"id": v, "position": {"edge": name, "offset": middle}} for v in "zxy"]
+        client.create_fleet(
+            {
+                "id": "f",
+                "network": network_id,
+                "vehicles": vehicles,
+                "stands": [s.to_dict() for s in areas],
+            }
+        )
+        homes = stand_homes(client.get_fleet("f"), areas)
+    assert {v: (p, a.id) for v, (p, a) in homes.items()} == {
+        "x": ((name, middle), "a"),
+        "y": ((name, middle), "b"),
+        "z": ((name, middle), "b"),
+    }
