@@ -61,7 +61,7 @@ def fleet_stops(path: Path) -> list[dict[str, str]]:
 @pytest.fixture(scope="module")
 def run(tmp_path_factory: pytest.TempPathFactory) -> tuple[CosimResult, Path]:
     out = tmp_path_factory.mktemp("stands")
-    return run_cosim(small("sa"), out_dir=out, progress=False), out
+    return run_cosim(small("sa,optimum"), out_dir=out, progress=False), out
 
 
 def test_idle_vehicles_park_in_their_stands_and_requests_are_served(
@@ -69,7 +69,7 @@ def test_idle_vehicles_park_in_their_stands_and_requests_are_served(
 ) -> None:
     result, out = run
     areas = parking_areas(PARKING)
-    (sa,) = result.runs
+    (sa,) = [r for r in result.runs if r.policy == "sa"]
     parked = [s for s in fleet_stops(out / "seed0" / "stops-sa.xml") if s.get("parkingArea")]
     assert parked, "no fleet vehicle parked in a parkingArea"
     assert {s["parkingArea"] for s in parked} <= set(areas)
@@ -128,6 +128,26 @@ def test_sumo_taxistand_parks_at_the_stands_of_the_file(tmp_path: Path) -> None:
     assert {(areas[a][0], round(areas[a][1], 6)) for a in first.values()} == sites
     assert any(float(s["started"]) > result.spec.warmup for s in parked)
     assert result.runs[0].served >= 1
+
+
+def test_the_optimum_policy_waits_at_the_optimum_over_the_stands(
+    run: tuple[CosimResult, Path],
+) -> None:
+    """``optimum``'s vehicles are the optimum over the stands, parked in their parkingAreas."""
+    result, out = run
+    areas = parking_areas(PARKING)
+    optimum, prepared = result.optimum[0], result.prepared
+    assert optimum is not None and prepared is not None
+    edges = prepared.network.edge_ids
+    sites = sorted((edges[p.edge], round(p.offset, 6)) for p in optimum.positions)
+    assert set(sites) <= {(edge, round(middle, 6)) for edge, middle in areas.values()}
+    (run_optimum,) = [r for r in result.runs if r.policy == "optimum"]
+    for _, positions in run_optimum.snapshots:
+        assert sorted((e, round(o, 6)) for e, o in positions.values()) == sites
+    stops = fleet_stops(out / "seed0" / "stops-optimum.xml")
+    first = {s["id"]: s["parkingArea"] for s in reversed(stops) if s.get("parkingArea")}
+    assert sorted((areas[a][0], round(areas[a][1], 6)) for a in first.values()) == sites
+    assert run_optimum.served >= 1
 
 
 def cosim(*args: str) -> subprocess.CompletedProcess[str]:
