@@ -32,7 +32,14 @@ from routing_svc.network.safe_xml import check_xml_file
 from routing_svc.sa.stands import StandSet
 from routing_svc.types import NetPosition
 
-__all__ = ["DroppedStand", "Stand", "StandReading", "read_stands_file", "stands_on_network"]
+__all__ = [
+    "DroppedStand",
+    "Stand",
+    "StandReading",
+    "read_stands_file",
+    "stands_on_network",
+    "usable_stands",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,6 +136,26 @@ def read_stands_file(path: Path, network: CompiledNetwork) -> StandReading:
         raise InvalidInput(f"{path} is not a SUMO additional file: {exc.detail}") from None
     areas = sumolib.xml.parse(str(path), "parkingArea")
     return stands_on_network((_from_parking_area(a, network) for a in areas), network)
+
+
+def usable_stands(path: Path, network: CompiledNetwork, vehicles: int) -> StandReading:
+    """The stands of ``path`` (:func:`read_stands_file`) on ``network``, holding ``vehicles``.
+
+    Raises
+    ------
+    InvalidInput
+        What :func:`read_stands_file` raises; no usable stand (the first dropped
+        ones named); less capacity than ``vehicles``.
+    """
+    reading = read_stands_file(path, network)
+    if not reading.usable:
+        why = "; ".join(f"{d.id} (edge {d.edge}): {d.reason}" for d in reading.dropped[:3])
+        raise InvalidInput(
+            f"no stand of {path} is usable on this network"
+            + (f" ({len(reading.dropped)} dropped: {why})" if why else "")
+        )
+    reading.stand_set(network).check_fleet(vehicles)
+    return reading
 
 
 def _from_parking_area(area: Any, network: CompiledNetwork) -> Stand:

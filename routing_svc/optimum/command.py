@@ -34,7 +34,7 @@ from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork, RoadSpace, load_network
 from routing_svc.network.catalogue import resolve_network
 from routing_svc.network.costs import CostKind
-from routing_svc.network.stands import StandReading, read_stands_file
+from routing_svc.network.stands import usable_stands
 from routing_svc.optimum.evaluate import expected_cost
 from routing_svc.optimum.pmedian import Method
 from routing_svc.optimum.solve import DemandOptimum, solve_demand
@@ -162,7 +162,7 @@ def optimum_report(
     network = load_network(path)
     recipe = parse_demand_spec(demand)
     distribution = network_demand(network, recipe, rng=np.random.default_rng(seed))
-    reading = None if stands is None else _usable_stands(stands, network, vehicles)
+    reading = None if stands is None else usable_stands(stands, network, vehicles)
     space = RoadSpace(network, cost=_COSTS[cost])
     free = solve_demand(
         space,
@@ -215,25 +215,6 @@ def optimum_report(
             "ratio": value / unbounded if unbounded > 0.0 else None,
         }
     return report
-
-
-def _usable_stands(path: Path, network: CompiledNetwork, vehicles: int) -> StandReading:
-    """The stands of ``path`` that ``network`` can use, holding ``vehicles``.
-
-    Raises
-    ------
-    InvalidInput
-        No usable stand (the first dropped ones named), or too little capacity.
-    """
-    reading = read_stands_file(path, network)
-    if not reading.usable:
-        why = "; ".join(f"{d.id} (edge {d.edge}): {d.reason}" for d in reading.dropped[:3])
-        raise InvalidInput(
-            f"no stand of {path} is usable on this network"
-            + (f" ({len(reading.dropped)} dropped: {why})" if why else "")
-        )
-    reading.stand_set(network).check_fleet(vehicles)
-    return reading
 
 
 def _describe(space: RoadSpace, network: CompiledNetwork, position: NetPosition) -> dict[str, Any]:

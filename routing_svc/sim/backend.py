@@ -122,6 +122,17 @@ class SimBackend(Protocol):
         """
         ...
 
+    def park_in(self, vehicle: str, area: str) -> None:
+        """Drive ``vehicle`` to SUMO parkingArea ``area`` and park in it until dispatched.
+
+        Raises ``SimulationError`` as :meth:`park_at` does.
+        """
+        ...
+
+    def parked_in(self, area: str) -> list[str]:
+        """The vehicles parked in SUMO parkingArea ``area`` now, by id."""
+        ...
+
     def vehicle_places(self) -> list[tuple[str, str, float]]:
         """``(vehicle, edge, lane position)`` of the vehicles on normal edges, by id."""
         ...
@@ -207,6 +218,33 @@ class _ApiBackend:
         return float(route.travelTime) if route.edges else math.inf
 
     def park_at(self, vehicle: str, edge: str, offset: float) -> None:
+        def stop() -> None:
+            self.api.vehicle.setStop(
+                vehicle,
+                edge,
+                pos=offset,
+                laneIndex=self._stop_lane(edge),
+                duration=PARK_SECONDS,
+                flags=1,
+            )
+
+        self._park(vehicle, edge, offset, stop, f"{edge}@{offset:.1f}")
+
+    def park_in(self, vehicle: str, area: str) -> None:
+        try:
+            lane = str(self.api.parkingarea.getLaneID(area))
+            start = float(self.api.parkingarea.getStartPos(area))
+        except self._error as exc:
+            raise SimulationError(f"no parkingArea {area!r}: {exc}") from None
+        edge = lane.rpartition("_")[0] or lane
+
+        def stop() -> None:
+            self.api.vehicle.setParkingAreaStop(vehicle, area, PARK_SECONDS)
+
+        self._park(vehicle, edge, start, stop, f"parkingArea {area}")
+
+    def _park(self, vehicle: str, edge: str, offset: float, stop: Any, where: str) -> None:
+        """Route ``vehicle`` to ``(edge, offset)`` and add the parking ``stop`` there."""
         vehicle_api = self.api.vehicle
         road = str(vehicle_api.getRoadID(vehicle))
         if not road or road.startswith(":"):
@@ -226,18 +264,14 @@ class _ApiBackend:
                 vehicle_api.setRoute(vehicle, self._loop(road, edge))
             else:
                 vehicle_api.changeTarget(vehicle, edge)
-            vehicle_api.setStop(
-                vehicle,
-                edge,
-                pos=offset,
-                laneIndex=self._stop_lane(edge),
-                duration=PARK_SECONDS,
-                flags=1,
-            )
+            stop()
             if stopped:
                 vehicle_api.resume(vehicle)
         except self._error as exc:
-            raise SimulationError(f"cannot send {vehicle} to {edge}@{offset:.1f}: {exc}") from None
+            raise SimulationError(f"cannot send {vehicle} to {where}: {exc}") from None
+
+    def parked_in(self, area: str) -> list[str]:
+        return sorted(str(v) for v in self.api.parkingarea.getVehicleIDs(area))
 
     def _stop_lane(self, edge: str) -> int:
         """The rightmost lane of ``edge`` open to passenger cars."""

@@ -9,11 +9,19 @@ Examples::
     routing-svc cosim --net drt --policies sa,sa-floor --shift-at 3600 --history 1000
     routing-svc cosim --net drt --service-url http://127.0.0.1:8000 --policies sa
     routing-svc cosim --net grid --gui --policies sa --seeds 0
+    routing-svc cosim --net badhersfeld.net.xml.gz --stands badhersfeld.parking.add.xml
 
 Prints the JSON summary (one entry per policy: SUMO's mean and 90th-percentile
 wait, the fraction within 300/600/900 s, requests served, empty km, requests
 per vehicle-hour, busy fraction, simulation speed); writes it with the inputs,
 SUMO's outputs and the PNG plots under ``--out``.
+
+With ``--stands FILE.add.xml`` the usable ``parkingArea`` elements of the file
+(read as ``routing-svc stands`` reads them) are the stands: the service's fleets
+are restricted to them and their idle vehicles park in them, ``optimum`` is
+the optimum over them and ``sumo-taxistand`` uses them as its taxi stands. The
+summary's ``stands`` names the file and counts the stands; ``unparked`` counts
+the vehicles that found no room in their stand.
 """
 
 from __future__ import annotations
@@ -84,6 +92,13 @@ def add_parser(subparsers: Any) -> None:
         help="comma list (default: sa,sa-available,optimum,sumo-stop,sumo-taxistand; "
         "also sa-cold, sa-floor, static, sumo-circling)",
     )
+    p.add_argument(
+        "--stands",
+        type=Path,
+        default=None,
+        metavar="FILE.add.xml",
+        help="park at the usable parkingAreas of a SUMO additional file (stands)",
+    )
     p.add_argument("--seeds", type=parse_seeds, default=(0,), help="comma list of seeds")
     p.add_argument("--workers", type=int, default=2, help="parallel SUMO processes")
     p.add_argument("--service-url", default=None, help="a running service (default: in-process)")
@@ -131,6 +146,7 @@ def run(args: argparse.Namespace) -> int:
         gui=args.gui,
         workers=args.workers,
         rule=args.rule,
+        stands=None if args.stands is None else str(args.stands),
     )
     result = run_cosim(spec, out_dir=args.out, progress=not args.quiet, resume=args.resume)
     if not args.no_plots:

@@ -26,7 +26,10 @@ After every simulation step, :meth:`FleetDispatcher.on_step`:
    customer, the others drive to the pick-up and wait with it) and queues
    the rest;
 4. sends every idle vehicle whose reference is elsewhere to its reference
-   (after a drop-off, or when a learning step moved it);
+   (after a drop-off, or when a learning step moved it); a fleet with stands
+   sends it to its stand instead (the fleet's ``stands``, read again after
+   every learning step), where it parks in the stand's SUMO parkingArea, or
+   on the road beside it when the parkingArea has no room left (counted);
 5. sends the state changes of the step in one batch.
 
 Before any question to the service the staged changes are sent, so an
@@ -42,6 +45,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from routing_svc.client import FleetClient
+from routing_svc.network.stands import Stand
 from routing_svc.sim.backend import (
     TAXI_GONE,
     TAXI_IDLE,
@@ -50,7 +54,7 @@ from routing_svc.sim.backend import (
     SimulationError,
 )
 
-__all__ = ["DispatchLog", "FleetDispatcher", "Snapshot", "Waiting"]
+__all__ = ["DispatchLog", "FleetDispatcher", "Snapshot", "Waiting", "stand_homes"]
 
 #: Live travel times are clipped to at most this multiple of the free-flow time.
 MAX_SLOWDOWN = 20.0
@@ -106,6 +110,8 @@ class DispatchLog:
     traffic_updates: int = 0
     state_batches: int = 0
     """Batches of vehicle states sent to the service."""
+    unparked: int = 0
+    """Vehicles sent to a stand whose parkingArea had no room left (they waited on the road)."""
     state_changes: list[tuple[float, str, str]] = field(default_factory=list)
     """``(time, vehicle, status)`` of every state change sent (positions left out)."""
     named: dict[str, str] = field(default_factory=dict)
@@ -121,6 +127,37 @@ class DispatchLog:
 
 def _position(data: Mapping[str, Any]) -> Position:
     return (str(data["edge"]), float(data["offset"]))
+
+
+def stand_homes(
+    fleet: Mapping[str, Any], stands: Sequence[Stand]
+) -> dict[str, tuple[Position, Stand]]:
+    """Each vehicle's stand in a fleet answer (its ``stands``), and the parkingArea it parks in.
+
+    ``stands`` are the parkingAreas the fleet's stands were made of; where
+    several share a position (one stand of the fleet, capacities added), the
+    stand's vehicles, by id, fill them in order.
+
+    Raises
+    ------
+    SimulationError
+        The fleet has no stands, or a stand at no position of ``stands``.
+    """
+    by_position: dict[Position, list[Stand]] = {}
+    for stand in stands:
+        by_position.setdefault((stand.edge, stand.offset), []).append(stand)
+    if not fleet.get("stands"):
+        raise SimulationError(f"fleet {fleet.get('id')!r} has no stands")
+    homes: dict[str, tuple[Position, Stand]] = {}
+    for answer in fleet["stands"]:
+        position = _position(answer["position"])
+        areas = by_position.get(position)
+        if not areas:
+            raise SimulationError(f"the fleet's stand at {position} is no parkingArea given")
+        slots = [area for area in areas for _ in range(area.capacity)]
+        for vehicle, area in zip(sorted(answer["vehicles"]), slots, strict=False):
+            homes[str(vehicle)] = (position, area)
+    return homes
 
 
 class FleetDispatcher:
@@ -152,6 +189,9 @@ class FleetDispatcher:
         Seconds between two records of the reference positions.
     position_period : float
         Seconds between two reports of the positions of available vehicles that drive.
+    stands : sequence of Stand, optional
+        The parkingAreas the fleet's stands were made of: idle vehicles park
+        in them (:func:`stand_homes`). ``None``: they park at their references.
     """
 
     def __init__(
@@ -167,6 +207,7 @@ class FleetDispatcher:
         traffic_period: float = 60.0,
         snapshot_period: float = 300.0,
         position_period: float = 30.0,
+        stands: Sequence[Stand] | None = None,
     ) -> None:
         self.backend = backend
         self.client = client
@@ -178,7 +219,13 @@ class FleetDispatcher:
         self.traffic_period = traffic_period
         self.snapshot_period = snapshot_period
         self.position_period = position_period
+        self.stands = tuple(stands) if stands is not None else None
         self.references: dict[str, Position] = {}
+        """Where each idle vehicle waits: its reference, or its stand with stands."""
+        self.areas: dict[str, Stand] = {}
+        """With stands: each vehicle's parkingArea."""
+        self.sent_to: dict[str, str] = {}
+        """Idle vehicles sent to (or parked in) a parkingArea, and its id."""
         self._read_references()
         self.busy: set[str] = set()
         self.escorts: dict[str, str] = {}
@@ -259,6 +306,11 @@ class FleetDispatcher:
 
     def _read_references(self) -> None:
         fleet = self.client.get_fleet(self.fleet_id)
+        if self.stands is not None:
+            homes = stand_homes(fleet, self.stands)
+            self.areas = {vehicle: area for vehicle, (_, area) in homes.items()}
+            self._update_references({vehicle: p for vehicle, (p, _) in homes.items()})
+            return
         moved = {
             str(v["id"]): _position(v.get("reference") or v["position"]) for v in fleet["vehicles"]
         }
@@ -280,7 +332,7 @@ class FleetDispatcher:
         if not learn:
             return self.client.assign(self.fleet_id, position, requires=needs)
         answer = self.client.post_target(self.fleet_id, position, requires=needs)
-        if answer.get("consolidated"):
+        if answer.get("consolidated") or self.stands is not None:
             self._read_references()
         else:
             moved = {str(b["vehicle"]): _position(b["position"]) for b in answer["backed_off"]}
@@ -353,6 +405,7 @@ class FleetDispatcher:
             return False
         self.busy.add(vehicle)
         self.homeless.discard(vehicle)
+        self.sent_to.pop(vehicle, None)
         self.log.dispatched[reservation.person] = vehicle
         self._stage(vehicle, "busy")
         return True
@@ -363,6 +416,7 @@ class FleetDispatcher:
         reservation = waiting.reservation
         self.busy.add(vehicle)
         self.homeless.discard(vehicle)
+        self.sent_to.pop(vehicle, None)
         self.escorts[vehicle] = waiting.carrier
         self._stage(vehicle, "busy")
         try:
@@ -380,6 +434,7 @@ class FleetDispatcher:
             self._stage(vehicle, "offline")
         self.busy.discard(vehicle)
         self.homeless.discard(vehicle)
+        self.sent_to.pop(vehicle, None)
 
     def place(self, vehicle: str) -> Position | None:
         """Where a vehicle is now, on the service's network (``None``: not on it now)."""
@@ -443,9 +498,8 @@ class FleetDispatcher:
             if self.backend.taxi_state(vehicle) == TAXI_GONE:
                 self._lose(vehicle)
                 continue
-            edge, offset = self.references[vehicle]
             try:
-                self.backend.park_at(vehicle, edge, offset)
+                self._park(vehicle)
             except SimulationError:
                 self.log.park_retries += 1
                 self.homeless.add(vehicle)
@@ -453,3 +507,20 @@ class FleetDispatcher:
             here = self.place(vehicle)
             if here is not None and self.reported.get(vehicle) != here:
                 self._stage(vehicle, "available", position=here)
+
+    def _park(self, vehicle: str) -> None:
+        """Send an idle vehicle to its stand's parkingArea if it has room, else to its
+        reference (or stand) on the road."""
+        self.sent_to.pop(vehicle, None)
+        area = self.areas.get(vehicle) if self.stands is not None else None
+        if area is not None:
+            others = set(self.backend.parked_in(area.id))
+            others.update(v for v, a in self.sent_to.items() if a == area.id)
+            others.discard(vehicle)
+            if len(others) < area.capacity:
+                self.backend.park_in(vehicle, area.id)
+                self.sent_to[vehicle] = area.id
+                return
+            self.log.unparked += 1
+        edge, offset = self.references[vehicle]
+        self.backend.park_at(vehicle, edge, offset)

@@ -26,7 +26,7 @@ import numpy as np
 from routing_svc.errors import InvalidInput
 from routing_svc.sim.measures import PolicyRun
 from routing_svc.sim.policies import floored_step
-from routing_svc.sim.prepare import Prepared, prepare_seeds
+from routing_svc.sim.prepare import Prepared, cosim_stands, prepare_seeds
 from routing_svc.sim.run import PolicyJob, process_map, run_saved
 from routing_svc.sim.scenario import Optimum
 from routing_svc.sim.spec import CosimSpec
@@ -81,7 +81,16 @@ class CosimResult:
             }
             for seed, opt in self.optimum.items()
         }
-        return {"spec": self.spec.to_dict(), "policies": policies, "optimum": optimum}
+        summary = {"spec": self.spec.to_dict(), "policies": policies, "optimum": optimum}
+        reading = self.prepared.stands if self.prepared is not None else None
+        if reading is not None:
+            summary["stands"] = {
+                "file": self.spec.stands,
+                "usable": len(reading.usable),
+                "dropped": len(reading.dropped),
+                "capacity": reading.capacity,
+            }
+        return summary
 
 
 def _jobs(spec: CosimSpec, prepared: Prepared, *, progress: bool, resume: bool) -> list[PolicyJob]:
@@ -123,6 +132,8 @@ def _jobs(spec: CosimSpec, prepared: Prepared, *, progress: bool, resume: bool) 
                     gui=spec.gui,
                     snapshot_period=spec.snapshot_period,
                     rule=spec.rule,
+                    stands=prepared.stands.usable if prepared.stands is not None else (),
+                    stands_file=None if spec.stands is None else Path(spec.stands).resolve(),
                     progress=progress and (single or spec.gui),
                     resume=resume,
                 )
@@ -152,9 +163,10 @@ def run_cosim(
     -------
     CosimResult
     """
+    stands = cosim_stands(spec)  # a bad stands file fails before anything is written
     out_dir = out_dir.resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
-    prepared = prepare_seeds(spec, out_dir=out_dir, progress=progress)
+    prepared = prepare_seeds(spec, out_dir=out_dir, progress=progress, stands=stands)
     jobs = _jobs(spec, prepared, progress=progress, resume=resume)
     workers = 1 if spec.gui else min(spec.workers, len(jobs))
     runs = process_map(

@@ -120,6 +120,12 @@ class FakeBackend:
         self.parked.append((self.now, vehicle, edge, offset))
         self._edges[vehicle] = edge
 
+    def park_in(self, vehicle: str, area: str) -> None:
+        raise SimulationError("the fake backend has no parkingAreas")
+
+    def parked_in(self, area: str) -> list[str]:
+        return []
+
     def vehicle_places(self) -> list[tuple[str, str, float]]:
         return [(v, e, 0.0) for v, e in sorted(self._edges.items())]
 

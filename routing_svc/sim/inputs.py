@@ -29,6 +29,7 @@ __all__ = [
     "sumo_options",
     "write_fleet",
     "write_persons",
+    "write_stands_rerouter",
     "write_taxi_stands",
 ]
 
@@ -59,11 +60,13 @@ class Request:
 
 @dataclass(frozen=True, slots=True)
 class FleetVehicle:
-    """A fleet vehicle and where it is inserted (its first reference position)."""
+    """A fleet vehicle and where it is inserted (its first reference position);
+    ``area``: the SUMO parkingArea it starts parked in, if any."""
 
     id: str
     edge: str
     offset: float
+    area: str | None = None
 
 
 def random_trips(
@@ -167,6 +170,9 @@ def write_fleet(
         ``taxistand`` idle algorithm), choosing the closest one; vehicle ``k``
         starts parked at stand ``k`` (SUMO cannot send a taxi inserted on a
         stand to that stand).
+
+    A vehicle with an ``area`` starts parked in that parkingArea instead
+    (inserted at the start of its edge).
     """
     lines = [
         "<routes>",
@@ -182,16 +188,20 @@ def write_fleet(
     for number, v in enumerate(vehicles):
         pos = _stop_offset(v.offset, lengths[v.edge])
         edge = quoteattr(v.edge)
-        depart = _stand_span(v.offset, lengths[v.edge])[0] if stands else max(pos - 1.0, 0.0)
+        if v.area is not None:
+            depart = 0.0
+        elif stands:
+            depart = _stand_span(v.offset, lengths[v.edge])[0]
+        else:
+            depart = max(pos - 1.0, 0.0)
         lines.append(
             f'    <vehicle id={quoteattr(v.id)} type="{FLEET_TYPE}" depart="0" '
             f'departPos="{depart:.2f}" line="taxi">'
         )
         lines.append(f"        <route edges={edge}/>")
-        if stands:
-            lines.append(
-                f'        <stop parkingArea="{_stand_id(number)}" duration="{PARK_SECONDS:g}"/>'
-            )
+        if stands or (park and v.area is not None):
+            area = quoteattr(v.area if v.area is not None else _stand_id(number))
+            lines.append(f'        <stop parkingArea={area} duration="{PARK_SECONDS:g}"/>')
         elif park:
             lines.append(
                 f'        <stop edge={edge} endPos="{pos:.2f}" duration="{PARK_SECONDS:g}" '
@@ -268,11 +278,27 @@ def write_taxi_stands(
             f'    <parkingArea id="{stand}" lane={lane} startPos="{start:.2f}" '
             f'endPos="{end:.2f}" roadsideCapacity="{capacity}" friendlyPos="true"/>'
         )
-    edges = quoteattr(" ".join(dict.fromkeys(s.edge for s in sites)))
-    lines.append(f'    <rerouter id="{STANDS_REROUTER}" edges={edges}>')
+    lines += _rerouter(stand_ids, [s.edge for s in sites])
+    lines.append("</additional>")
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def _rerouter(areas: Sequence[str], edges: Sequence[str]) -> list[str]:
+    """The rerouter :data:`STANDS_REROUTER` on ``edges``, listing the parkingAreas ``areas``."""
+    on = quoteattr(" ".join(dict.fromkeys(edges)))
+    lines = [f'    <rerouter id="{STANDS_REROUTER}" edges={on}>']
     lines.append('        <interval begin="0" end="1e9">')
-    lines += [f'            <parkingAreaReroute id="{stand}"/>' for stand in stand_ids]
-    lines += ["        </interval>", "    </rerouter>", "</additional>"]
+    lines += [f"            <parkingAreaReroute id={quoteattr(a)}/>" for a in areas]
+    lines += ["        </interval>", "    </rerouter>"]
+    return lines
+
+
+def write_stands_rerouter(path: Path, areas: Sequence[str], edges: Sequence[str]) -> Path:
+    """The taxi stands of SUMO's ``taxistand`` idle algorithm: the rerouter
+    :data:`STANDS_REROUTER` listing parkingAreas defined in another additional file
+    (loaded before this one), on their ``edges``."""
+    lines = ["<additional>", *_rerouter(areas, edges), "</additional>"]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path
 
@@ -304,6 +330,7 @@ def sumo_options(
     dispatch: str,
     idle: str = "stop",
     additional: Sequence[Path] = (),
+    stops: Path | None = None,
 ) -> list[str]:
     """SUMO's command line (without the binary) for one co-simulation run.
 
@@ -316,8 +343,12 @@ def sumo_options(
         What SUMO's taxi device does with an idle taxi.
     additional : sequence of Path
         SUMO additional files (e.g. the taxi stands).
+    stops : Path, optional
+        SUMO's stop output (every stop, with its parkingArea; unfinished ones too).
     """
     extra = ["--additional-files", ",".join(str(a) for a in additional)] if additional else []
+    if stops is not None:
+        extra += ["--stop-output", str(stops), "--stop-output.write-unfinished"]
     return [
         *extra,
         "--net-file",

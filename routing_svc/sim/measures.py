@@ -270,6 +270,8 @@ class PolicyRun:
     """Requests before this time are not counted."""
     traffic_updates: int = 0
     park_retries: int = 0
+    unparked: int = 0
+    """Times an idle vehicle found no room in its stand's parkingArea (it waited on the road)."""
     lost: int = 0
     """Fleet vehicles that left the simulation before the end (SUMO's tripinfo)."""
     vehicles: int = 0
@@ -347,6 +349,7 @@ class PolicyRun:
             state_batches=int(data.get("state_batches", 0)),
             traffic_updates=int(data["traffic_updates"]),
             park_retries=int(data.get("park_retries", 0)),
+            unparked=int(data.get("unparked", 0)),
             lost=int(data.get("lost", 0)),
             waits=[(float(t), float(w), bool(ok)) for t, w, ok in data["waits"]],
             predicted=[(float(t), bool(other)) for t, other in data["predicted"]],
@@ -384,6 +387,7 @@ class PolicyRun:
             "failed": self.failed,
             "traffic_updates": self.traffic_updates,
             "park_retries": self.park_retries,
+            "unparked": self.unparked,
             "lost": self.lost,
             "sim_seconds": self.sim_seconds,
             "wall_seconds": self.wall_seconds,

@@ -25,7 +25,8 @@
 ``sumo-taxistand``  SUMO's taxi device: ``greedy`` dispatch, idle taxis drive
                     to the closest taxi stand (``taxistand``); the stands are
                     parking areas at the ``optimum`` policy's sites, where the
-                    taxis also start.
+                    taxis also start (with ``--stands``: the file's parking
+                    areas, the taxis starting at the optimum over them).
 ==================  ==========================================================
 """
 
@@ -74,6 +75,12 @@ class Policy:
     floor: bool = False
     history: bool = False
     learning_vehicles: Literal["all", "available"] = "all"
+
+    @property
+    def uses_stands(self) -> bool:
+        """Whether the policy's vehicles wait at the stands of ``--stands``, if given
+        (the service's fleets and ``sumo-taxistand``)."""
+        return self.dispatch == "service" or self.idle == "taxistand"
 
 
 POLICIES: dict[str, Policy] = {

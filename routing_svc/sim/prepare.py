@@ -29,6 +29,7 @@ import numpy as np
 from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork, RoadSpace, load_network
+from routing_svc.network.stands import StandReading, usable_stands
 from routing_svc.sim.backend import make_backend
 from routing_svc.sim.inputs import FleetVehicle, Request, random_trips, sumo_options, write_persons
 from routing_svc.sim.measures import PolicyRun
@@ -44,12 +45,20 @@ from routing_svc.sim.scenario import (
     fleet_vehicles,
     mixed_demand,
     solve_optimum,
+    solve_stand_optimum,
     start_positions,
 )
 from routing_svc.sim.spec import CosimSpec
 from routing_svc.types import NetPosition
 
-__all__ = ["IncidentJob", "Prepared", "SeedInputs", "prepare_seeds", "record_incidents"]
+__all__ = [
+    "IncidentJob",
+    "Prepared",
+    "SeedInputs",
+    "cosim_stands",
+    "prepare_seeds",
+    "record_incidents",
+]
 
 Curve = list[tuple[float, float]]
 """``(time, exact expected free-flow wait)`` points."""
@@ -158,6 +167,8 @@ class Prepared:
     space: RoadSpace
     phases: list[Phase] | None
     seeds: list[SeedInputs]
+    stands: StandReading | None = None
+    """The usable stands of ``spec.stands``, if given."""
 
     @property
     def typical_cost(self) -> float:
@@ -171,6 +182,13 @@ class Prepared:
         if self.phases is not None:
             return demand_at(self.phases, time)
         return empirical_demand(self.network, seed.requests)
+
+    def optimum_for(self, demand: DemandDistribution[NetPosition]) -> Optimum:
+        """The p-median of ``demand``, over the stands if there are any."""
+        if self.stands is None:
+            return solve_optimum(self.space, demand, self.spec.vehicles)
+        stands = self.stands.stand_set(self.network)
+        return solve_stand_optimum(self.space, demand, self.spec.vehicles, stands)
 
     def evaluate(
         self, runs: Sequence[PolicyRun]
@@ -190,7 +208,7 @@ class Prepared:
         phase_optima: dict[float, float] = {}
         if self.phases is not None and len(self.phases) > 1:
             for phase in self.phases:
-                best = solve_optimum(self.space, phase.demand, self.spec.vehicles)
+                best = self.optimum_for(phase.demand)
                 phase_optima[phase.start] = best.expected_cost
         for seed in self.seeds:
             if seed.optimum is None:
@@ -270,8 +288,39 @@ def _incidents(
     return requests, history
 
 
-def prepare_seeds(spec: CosimSpec, *, out_dir: Path, progress: bool) -> Prepared:
-    """Write every seed's inputs under ``out_dir/seed<k>`` and solve the optimum."""
+def cosim_stands(spec: CosimSpec) -> StandReading | None:
+    """The usable stands of ``spec.stands`` on its network (``None`` without), holding
+    the fleet (:func:`~routing_svc.network.stands.usable_stands`).
+
+    Raises
+    ------
+    InvalidInput
+        No such file, not an additional file, no usable stand, too little capacity.
+    """
+    if spec.stands is None:
+        return None
+    from routing_svc.network.catalogue import resolve_network
+
+    network = load_network(resolve_network(spec.network))
+    return usable_stands(Path(spec.stands), network, spec.vehicles)
+
+
+def _at_stands(
+    network: CompiledNetwork, optimum: Optimum, stands: StandReading | None
+) -> tuple[FleetVehicle, ...]:
+    """The fleet at the optimum's positions; with stands, each in a parkingArea there."""
+    vehicles = fleet_vehicles(network, optimum.positions, prefix="fleet")
+    if stands is None:
+        return vehicles
+    areas = {(s.edge, s.offset): s.id for s in stands.usable}
+    return tuple(dataclasses.replace(v, area=areas[(v.edge, v.offset)]) for v in vehicles)
+
+
+def prepare_seeds(
+    spec: CosimSpec, *, out_dir: Path, progress: bool, stands: StandReading | None = None
+) -> Prepared:
+    """Write every seed's inputs under ``out_dir/seed<k>`` and solve the optimum
+    (over ``stands``, the usable stands of ``spec.stands``, if given)."""
     from routing_svc.demand import uniform_by_length
     from routing_svc.network.catalogue import resolve_network
 
@@ -316,16 +365,17 @@ def prepare_seeds(spec: CosimSpec, *, out_dir: Path, progress: bool) -> Prepared
         }
     else:
         requests, history = _incidents(spec, net, workdirs, trips, progress=progress)
+    prepared = Prepared(spec, net, network, space, phases, [], stands)
     shared: Optimum | None = None
     if phases is not None:
-        shared = solve_optimum(space, mixed_demand(phases, end=stop), spec.vehicles)
+        shared = prepared.optimum_for(mixed_demand(phases, end=stop))
     seeds = []
     for seed in spec.seeds:
         persons = write_persons(workdirs[seed] / "requests.rou.xml", requests[seed])
         starts = start_positions(network, spec.vehicles, rng=np.random.default_rng([seed, 2]))
         optimum = shared
         if optimum is None and requests[seed]:
-            optimum = solve_optimum(space, empirical_demand(network, requests[seed]), spec.vehicles)
+            optimum = prepared.optimum_for(empirical_demand(network, requests[seed]))
         seeds.append(
             SeedInputs(
                 seed=seed,
@@ -334,10 +384,9 @@ def prepare_seeds(spec: CosimSpec, *, out_dir: Path, progress: bool) -> Prepared
                 requests=tuple(requests[seed]),
                 history=tuple(history.get(seed, ())),
                 start_vehicles=fleet_vehicles(network, starts, prefix="fleet"),
-                optimum_vehicles=None
-                if optimum is None
-                else fleet_vehicles(network, optimum.positions, prefix="fleet"),
+                optimum_vehicles=None if optimum is None else _at_stands(network, optimum, stands),
                 optimum=optimum,
             )
         )
-    return Prepared(spec, net, network, space, phases, seeds)
+    prepared.seeds = seeds
+    return prepared

@@ -9,6 +9,9 @@ own policies run with its ``greedy`` dispatcher and nothing in the loop
 (``sumo-taxistand`` with taxi stands at its start sites). Either way every
 wait is read from SUMO's tripinfo output afterwards, and the fleet's load is
 sampled from SUMO's taxi states (:class:`~routing_svc.sim.measures.FleetLoad`).
+With stands (a parkingArea file), a run that uses them loads the file and
+writes SUMO's stop output ``stops-<policy>.xml``, where every parking stop
+names its parkingArea.
 """
 
 from __future__ import annotations
@@ -29,13 +32,15 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from routing_svc.client import FleetClient, HttpFleetClient
+from routing_svc.network.stands import Stand
 from routing_svc.sim.backend import SimulationError, make_backend
-from routing_svc.sim.dispatcher import FleetDispatcher
+from routing_svc.sim.dispatcher import FleetDispatcher, stand_homes
 from routing_svc.sim.inputs import (
     FleetVehicle,
     passenger_lanes,
     sumo_options,
     write_fleet,
+    write_stands_rerouter,
     write_taxi_stands,
 )
 from routing_svc.sim.measures import FleetLoad, PolicyRun, read_tripinfo
@@ -105,6 +110,12 @@ class PolicyJob:
         Reuse ``run-<policy>.json`` in ``workdir`` if it was saved for the same job.
     rule : str, optional
         The fleet's learning rule (``None``: the service's default).
+    stands : tuple of Stand
+        The usable stands of ``stands_file`` (parkingAreas).
+    stands_file : Path, optional
+        A SUMO additional file with those parkingAreas: a policy that
+        :attr:`~routing_svc.sim.policies.Policy.uses_stands` waits at them
+        (the service's fleet is created with them as its ``stands``).
     """
 
     policy: Policy
@@ -127,6 +138,13 @@ class PolicyJob:
     progress: bool = False
     resume: bool = False
     rule: str | None = None
+    stands: tuple[Stand, ...] = ()
+    stands_file: Path | None = None
+
+    @property
+    def at_stands(self) -> bool:
+        """Whether this run's vehicles wait at the stands of :attr:`stands_file`."""
+        return self.stands_file is not None and self.policy.uses_stands
 
     def key(self) -> str:
         """What determines the run's result, as JSON (for reusing a saved run).
@@ -141,7 +159,9 @@ class PolicyJob:
         }
         data["policy"] = dataclasses.asdict(self.policy)
         data["vehicles"] = [dataclasses.astuple(v) for v in self.vehicles]
-        data["contents"] = [_digest(path) for path in (self.net, *self.routes)]
+        data["stands"] = [dataclasses.astuple(s) for s in self.stands]
+        files = (self.net, *self.routes, *([self.stands_file] if self.stands_file else []))
+        data["contents"] = [_digest(path) for path in files]
         return json.dumps(data, sort_keys=True, default=str)
 
 
@@ -200,6 +220,8 @@ def _fleet_spec(job: PolicyJob, network_id: str, fleet_id: str) -> dict[str, Any
     }
     if job.rule is not None:
         spec["rule"] = job.rule
+    if job.at_stands:
+        spec["stands"] = [s.to_dict() for s in job.stands]
     if job.history:
         sample = [{"edge": edge, "offset": offset} for edge, offset in job.history]
         spec["vehicles"] = [{"id": v.id} for v in job.vehicles]
@@ -261,7 +283,12 @@ def run_policy(job: PolicyJob) -> PolicyRun:
         if client is not None:
             network_id = str(client.add_network(job.net, name=_network_id(job.net))["id"])
             client.create_fleet(_fleet_spec(job, network_id, fleet_id))
-            vehicles = _inserted_at_references(client.get_fleet(fleet_id), job.vehicles)
+            fleet = client.get_fleet(fleet_id)
+            vehicles = (
+                _inserted_at_stands(fleet, job.vehicles, job.stands)
+                if job.at_stands
+                else _inserted_at_references(fleet, job.vehicles)
+            )
         lengths = _edge_lengths(job.net)
         stands = job.policy.idle == "taxistand"
         fleet_file = write_fleet(
@@ -272,7 +299,18 @@ def run_policy(job: PolicyJob) -> PolicyRun:
             stands=stands,
         )
         additional = []
-        if stands:
+        if job.at_stands:
+            assert job.stands_file is not None
+            additional.append(job.stands_file)
+            if stands:
+                additional.append(
+                    write_stands_rerouter(
+                        job.workdir / f"stands-{name}.add.xml",
+                        [s.id for s in job.stands],
+                        [s.edge for s in job.stands],
+                    )
+                )
+        elif stands:
             additional.append(
                 write_taxi_stands(
                     job.workdir / f"stands-{name}.add.xml",
@@ -291,6 +329,7 @@ def run_policy(job: PolicyJob) -> PolicyRun:
             dispatch="traci" if by_service else "greedy",
             idle=job.policy.idle,
             additional=additional,
+            stops=job.workdir / f"stops-{name}.xml" if job.at_stands else None,
         )
         backend.start(options)
         request_end = job.end if job.request_end is None else job.request_end
@@ -305,6 +344,7 @@ def run_policy(job: PolicyJob) -> PolicyRun:
                 traffic_edges=_free_flow_times(job.net) if job.traffic_period else None,
                 traffic_period=job.traffic_period or 60.0,
                 snapshot_period=job.snapshot_period,
+                stands=job.stands if job.at_stands else None,
             )
 
         def step_once() -> float:
@@ -346,6 +386,19 @@ def _inserted_at_references(
     }
     return tuple(
         FleetVehicle(v.id, *references[v.id]) if v.id in references else v for v in vehicles
+    )
+
+
+def _inserted_at_stands(
+    fleet: Mapping[str, Any], vehicles: Sequence[FleetVehicle], stands: Sequence[Stand]
+) -> tuple[FleetVehicle, ...]:
+    """The SUMO vehicles of a fleet with stands, each parked in its stand's parkingArea
+    (:func:`~routing_svc.sim.dispatcher.stand_homes`)."""
+    homes = stand_homes(fleet, stands)
+    return tuple(
+        FleetVehicle(v.id, area.edge, area.offset, area=area.id)
+        for v in vehicles
+        for _, area in [homes[v.id]]
     )
 
 
@@ -392,6 +445,7 @@ def _result(
         state_batches=log.state_batches if log else 0,
         traffic_updates=log.traffic_updates if log else 0,
         park_retries=log.park_retries if log else 0,
+        unparked=log.unparked if log else 0,
         lost=sum(1 for f in measures.fleet if f.left),
         waits=[(r.requested, r.wait, r.served) for r in measures.rides],
         predicted=[

@@ -26,7 +26,10 @@ from routing_svc.demand.profile import HourlyProfile
 from routing_svc.demand.spec import network_demand, parse_demand_spec
 from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork, RoadSpace
+from routing_svc.optimum.pmedian import Method
 from routing_svc.optimum.solve import solve_demand
+from routing_svc.optimum.stands import solve_stands
+from routing_svc.sa.stands import StandSet
 from routing_svc.sim.inputs import FleetVehicle, Request
 from routing_svc.sim.requests import Phase
 from routing_svc.types import NetPosition
@@ -40,8 +43,13 @@ __all__ = [
     "fleet_vehicles",
     "mixed_demand",
     "solve_optimum",
+    "solve_stand_optimum",
     "start_positions",
 ]
+
+
+#: The optimum over stands is solved exactly up to this many (stand, demand atom) pairs.
+MILP_MAX_CELLS = 1_000_000
 
 
 @dataclass(frozen=True, slots=True)
@@ -130,6 +138,27 @@ def solve_optimum(
     best = solve_demand(space, demand, vehicles)
     positions = tuple(sorted(best.positions))
     return Optimum(positions, best.objective, best.solution.method, best.solution.proven_optimal)
+
+
+def solve_stand_optimum(
+    space: RoadSpace,
+    demand: DemandDistribution[NetPosition],
+    vehicles: int,
+    stands: StandSet[NetPosition],
+) -> Optimum:
+    """The p-median of ``demand`` over ``stands``, within their capacities
+    (:func:`~routing_svc.optimum.stands.solve_stands`; a stand repeated per vehicle it holds);
+    exact up to :data:`MILP_MAX_CELLS` stand-atom pairs, else the heuristic."""
+    cells = len(stands.positions) * len(demand)
+    method: Method = "auto" if cells <= MILP_MAX_CELLS else "heuristic"
+    best = solve_stands(space, demand, vehicles, stands, method=method)
+    positions = tuple(sorted(best.positions))
+    return Optimum(
+        positions,
+        expected_wait(space, positions, demand),
+        best.solution.method,
+        best.solution.proven_optimal,
+    )
 
 
 def expected_wait(

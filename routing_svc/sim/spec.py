@@ -71,6 +71,11 @@ class CosimSpec:
     rule : str, optional
         The learning rule of the service's fleets (``consolidating``, ``probe`` or
         ``paper``; ``None``: the service's default).
+    stands : str, optional
+        A SUMO additional file whose usable ``parkingArea`` elements are the
+        stands (:func:`~routing_svc.network.stands.usable_stands`): the service's
+        fleets are restricted to them and park in them when idle, the
+        ``optimum`` is solved over them, and ``sumo-taxistand`` uses them.
     """
 
     network: str
@@ -96,6 +101,7 @@ class CosimSpec:
     workers: int = 2
     snapshot_period: float = 300.0
     rule: str | None = None
+    stands: str | None = None
 
     def __post_init__(self) -> None:
         if self.mode not in ("persons", "incidents"):
