@@ -26,6 +26,10 @@ from routing_svc.sa.interchange import neighbourhood_search
 from routing_svc.sa.stands import StandSet, capacitated_sites
 from routing_svc.types import FloatArray, IntArray
 
+MILP_MAX_CELLS = 1_000_000
+"""``method="auto"`` solves the optimum over stands exactly (MILP, then polished) up to
+this many (stand, demand atom) pairs, and by the heuristic beyond."""
+
 
 @dataclass(frozen=True, slots=True)
 class StandOptimum(DemandOptimum[P]):
@@ -45,7 +49,8 @@ def solve_stands(
     method: Method = "auto",
     time_limit: float = 60.0,
 ) -> StandOptimum[P]:
-    """The p-median (``power = 1``) or p-power-median of ``demand`` over ``stands``.
+    """The p-median (``power = 1``) or p-power-median of ``demand`` over ``stands``
+    (``method="auto"``: exact up to :data:`MILP_MAX_CELLS` stand-atom pairs).
 
     Raises
     ------
@@ -54,6 +59,8 @@ def solve_stands(
     """
     stands.check_fleet(p)
     sites = list(stands.positions)
+    if method == "auto" and len(sites) * len(demand) > MILP_MAX_CELLS:
+        method = "heuristic"
     matrix = space.cost_matrix(sites, list(demand.positions)) ** power
     weights = np.asarray(demand.weights, dtype=np.float64)
     solutions: list[PMedianSolution] = []

@@ -103,6 +103,7 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
             types=types,
             speeds=[v.speed for v in spec.vehicles],
             power=objective.power,
+            stands=stands,
         )
         reference = {"demand": demand_spec, "optimum": optimum}
     return {

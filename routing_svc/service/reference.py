@@ -15,7 +15,10 @@ heterogeneous optimum of objective (11) of Le Ny & Pappas
 (:mod:`routing_svc.optimum.heterogeneous`): a target is served when the last
 required vehicle arrives, in travel time ``d / v``. It is stored with
 ``"kind": "heterogeneous"`` and the optimal position of every vehicle, and the
-gap uses the same objective. Fleets stored without ``kind`` are p-median ones.
+gap uses the same objective. A fleet of identical vehicles with stands has the
+optimum over its stands (``"kind": "stands"``, :func:`routing_svc.optimum.stands.solve_stands`),
+and its gap is that of the stands where its vehicles wait. Fleets stored without
+``kind`` are p-median ones.
 """
 
 from __future__ import annotations
@@ -35,7 +38,9 @@ from routing_svc.optimum.heterogeneous import (
     is_heterogeneous,
     requirement_mix,
 )
+from routing_svc.optimum.stands import solve_stands
 from routing_svc.sa import Fleet
+from routing_svc.sa.stands import StandSet
 from routing_svc.service.networks import NetworkEntry
 from routing_svc.service.schemas import DemandSpec
 from routing_svc.types import NetPosition
@@ -109,11 +114,23 @@ def reference_optimum(
     types: Sequence[str],
     speeds: Sequence[float],
     power: float,
+    stands: StandSet[NetPosition] | None = None,
 ) -> dict[str, Any]:
-    """The stored optimum: the p-median for identical vehicles that any one serves,
-    else the heterogeneous optimum with every vehicle's position."""
+    """The stored optimum: the p-median for identical vehicles that any one serves (over
+    the fleet's ``stands``, if it has any: kind ``stands``), else the heterogeneous
+    optimum with every vehicle's position."""
     mix = requirement_classes(spec)
     if not is_heterogeneous(types, speeds, mix):
+        if stands is not None:
+            best = solve_stands(entry.space(cost), demand, len(types), stands, power=power)
+            return {
+                "kind": "stands",
+                "objective": best.objective,
+                "method": best.solution.method,
+                "proven_optimal": best.solution.proven_optimal,
+                "seconds": best.solution.seconds,
+                "sites": len(best.sites),
+            }
         return solve_reference(entry, cost=cost, demand=demand, vehicles=len(types), power=power)[1]
     space = entry.space(cost)
     sites = candidate_sites(entry.network, demand, max_sites=MAX_SITES)
@@ -141,10 +158,19 @@ def optimum_start(
 
 
 def expected_cost_now(runtime: ReferencedFleet) -> float:
-    """Exact expected cost of the fleet's current positions under its reference demand."""
+    """Exact expected cost of the fleet's current positions under its reference demand
+    (of its stands, where a fleet with stands waits)."""
     assert runtime.reference is not None
     demand = runtime.reference_distribution()
     fleet = runtime.fleet
+    if runtime.reference["optimum"].get("kind") == "stands":
+        return expected_cost(
+            runtime.entry.space(runtime.cost_kind),
+            list(fleet.stands().values()),
+            np.ones(len(fleet.vehicles)),
+            demand,
+            power=fleet.config.objective.power,
+        )
     if runtime.reference["optimum"].get("kind") == "heterogeneous":
         return heterogeneous_cost(
             runtime.entry.space(runtime.cost_kind),

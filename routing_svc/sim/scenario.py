@@ -26,7 +26,6 @@ from routing_svc.demand.profile import HourlyProfile
 from routing_svc.demand.spec import network_demand, parse_demand_spec
 from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork, RoadSpace
-from routing_svc.optimum.pmedian import Method
 from routing_svc.optimum.solve import solve_demand
 from routing_svc.optimum.stands import solve_stands
 from routing_svc.sa.stands import StandSet
@@ -46,10 +45,6 @@ __all__ = [
     "solve_stand_optimum",
     "start_positions",
 ]
-
-
-#: The optimum over stands is solved exactly up to this many (stand, demand atom) pairs.
-MILP_MAX_CELLS = 1_000_000
 
 
 @dataclass(frozen=True, slots=True)
@@ -147,11 +142,9 @@ def solve_stand_optimum(
     stands: StandSet[NetPosition],
 ) -> Optimum:
     """The p-median of ``demand`` over ``stands``, within their capacities
-    (:func:`~routing_svc.optimum.stands.solve_stands`; a stand repeated per vehicle it holds);
-    exact up to :data:`MILP_MAX_CELLS` stand-atom pairs, else the heuristic."""
-    cells = len(stands.positions) * len(demand)
-    method: Method = "auto" if cells <= MILP_MAX_CELLS else "heuristic"
-    best = solve_stands(space, demand, vehicles, stands, method=method)
+    (:func:`~routing_svc.optimum.stands.solve_stands`; a stand repeated per vehicle it
+    holds)."""
+    best = solve_stands(space, demand, vehicles, stands)
     positions = tuple(sorted(best.positions))
     return Optimum(
         positions,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 import numpy as np
@@ -11,9 +12,10 @@ from fastapi.testclient import TestClient
 from routing_svc.demand import DemandDistribution
 from routing_svc.demand import network as network_demand
 from routing_svc.network import RoadSpace, load_network
+from routing_svc.optimum import expected_cost
 from routing_svc.optimum.heterogeneous import RequirementClass, heterogeneous_cost
 from routing_svc.types import NetPosition
-from tests.helpers import DRT
+from tests.helpers import DRT, targets
 
 NET = load_network(DRT)
 SPACE = RoadSpace(NET, cost="length")
@@ -145,3 +147,44 @@ def test_a_bad_mix_is_rejected_and_creates_nothing(
     assert r.headers["content-type"].startswith("application/problem+json")
     assert client.get("/v1/fleets/bad").status_code == 404
     assert client.get("/v1/fleets").json()["items"] == []
+
+
+STAND_EDGES = (5, 10, 200, 400, 550)
+
+
+def test_a_fleet_with_stands_has_its_gap_to_the_optimum_over_them(client: TestClient) -> None:
+    stands = [{"edge": edge(e), "offset": 0.0, "capacity": 1} for e in STAND_EDGES]
+    body = fleet_body("parked", reference_demand=reference_demand(None), stands=stands)
+    for v in body["vehicles"]:
+        v["type"], v["speed"] = "default", 1.0
+    r = client.post("/v1/fleets", json=body)
+    assert r.status_code == 201, r.text
+    r = client.post("/v1/fleets/parked/targets:batch", json={"targets": targets(5, 40)})
+    assert r.status_code == 200, r.text
+    optimum = client.get("/v1/fleets/parked/metrics").json()["optimum"]
+    assert optimum["kind"] == "stands"
+    demand = weighted_demand()
+    sites = [NetPosition(e, 0.0) for e in STAND_EDGES]
+    # brute force over every three of the five stands (capacity 1 each)
+    best = min(
+        expected_cost(SPACE, list(chosen), np.ones(3), demand)
+        for chosen in itertools.combinations(sites, 3)
+    )
+    assert optimum["objective"] == pytest.approx(best, rel=1e-9)
+    # the gap is that of the stands where the vehicles wait
+    view = client.get("/v1/fleets/parked").json()["stands"]
+    waiting = [
+        NetPosition(NET.edge_index[s["position"]["edge"]], float(s["position"]["offset"]))
+        for s in view
+        for _ in s["vehicles"]
+    ]
+    assert len(waiting) == 3
+    value = expected_cost(SPACE, waiting, np.ones(3), demand)
+    assert optimum["expected_cost"] == pytest.approx(value, rel=1e-12)
+    assert optimum["gap"] == pytest.approx((value - best) / best, rel=1e-9, abs=1e-12)
+    assert optimum["gap"] >= -1e-12
+    # the same fleet without stands is measured against the free p-median, which is lower
+    free_body = {k: v for k, v in body.items() if k != "stands"} | {"id": "free"}
+    assert client.post("/v1/fleets", json=free_body).status_code == 201
+    free = client.get("/v1/fleets/free/metrics").json()["optimum"]
+    assert free["kind"] == "p-median" and free["objective"] <= best * (1 + 1e-9)
