@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import os
+import signal
 import threading
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -45,8 +46,12 @@ def _solve(job: ConsolidationJob[P]) -> Consolidation[P]:
 
 
 def _exit_with(parent: int) -> None:
-    """Run in each worker: leave as soon as the service process is gone (a ``kill -9``
-    gives the worker no other sign), so that no worker outlives its service."""
+    """Run in each worker: the service's own signals (Ctrl-C or ``SIGTERM`` to its process
+    group) are left to the service, which stops its workers when it shuts down; and the
+    worker leaves as soon as the service process is gone (a ``kill -9`` gives it no other
+    sign), so that no worker outlives its service."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
     def watch() -> None:
         while os.getppid() == parent:

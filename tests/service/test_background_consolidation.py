@@ -217,3 +217,27 @@ def test_no_worker_outlives_its_service_process(tmp_path: Path) -> None:
             if alive(w):
                 os.kill(w, signal.SIGKILL)
         server.stop()
+
+
+def test_a_signal_to_the_service_group_stops_it_cleanly_with_a_solve_in_flight(
+    tmp_path: Path,
+) -> None:
+    server = LiveServer(f"sqlite:///{tmp_path / 'events.db'}", tmp_path).start()
+    assert server.process is not None
+    workers: list[int] = []
+    try:
+        httpx.post(server.url + "/v1/fleets", json=spread_fleet_body("f")).raise_for_status()
+        body = {"targets": hotspot_stream(FIRST + 10)}
+        httpx.post(server.url + "/v1/fleets/f/targets:batch", json=body, timeout=60)
+        deadline = time.monotonic() + PATIENCE_S
+        while not (workers := children(server.process.pid)):
+            assert time.monotonic() < deadline, "no worker process started"
+            time.sleep(0.1)
+        server.stop()  # SIGTERM to the process group, as Ctrl-C or `timeout` sends it
+        assert "failed in its worker" not in server.log.read_text()
+        assert not any(alive(w) for w in workers)
+    finally:
+        for w in workers:
+            if alive(w):
+                os.kill(w, signal.SIGKILL)
+        server.stop()
