@@ -417,29 +417,23 @@ def main() -> int:
                 seconds=seconds, connections=args.connections, label="s",
                 baseline=f"http://127.0.0.1:{port}", rounds=args.rounds, probe=args.probe,
             )  # fmt: skip
-            # head to head: the same service with the single-target fast path off
-            route_env = {
-                **os.environ,
-                "DATABASE_URL": f"sqlite:///{tmp / 'bench_route.db'}",
-                "ROUTING_SVC_TARGET_FAST_PATH": "false",
-            }
-            report["sqlite_without_fast_path"] = bench_service(
-                env=route_env, net=args.net, tmp=tmp, instances=1, edge_ids=edge_ids,
-                seconds=seconds, connections=args.connections, label="r",
-                baseline=f"http://127.0.0.1:{port}", rounds=args.rounds, probe=args.probe,
-            )  # fmt: skip
-            # head to head: the same service solving each consolidation inside the target
-            # that made it due (no worker process)
-            inline_env = {
-                **os.environ,
-                "DATABASE_URL": f"sqlite:///{tmp / 'bench_inline.db'}",
-                "ROUTING_SVC_CONSOLIDATION_WORKERS": "0",
-            }
-            report["sqlite_consolidating_inline"] = bench_service(
-                env=inline_env, net=args.net, tmp=tmp, instances=1, edge_ids=edge_ids,
-                seconds=seconds, connections=args.connections, label="i",
-                baseline=f"http://127.0.0.1:{port}", rounds=args.rounds, probe=args.probe,
-            )  # fmt: skip
+            # head to head, each against the trivial app in turns: the same service with
+            # the single-target fast path off, and solving each consolidation inside the
+            # target that made it due (no worker process)
+            for key, label, setting in (
+                ("sqlite_without_fast_path", "r", {"ROUTING_SVC_TARGET_FAST_PATH": "false"}),
+                ("sqlite_consolidating_inline", "i", {"ROUTING_SVC_CONSOLIDATION_WORKERS": "0"}),
+            ):
+                variant_env = {
+                    **os.environ,
+                    "DATABASE_URL": f"sqlite:///{tmp / f'bench_{label}.db'}",
+                    **setting,
+                }
+                report[key] = bench_service(
+                    env=variant_env, net=args.net, tmp=tmp, instances=1, edge_ids=edge_ids,
+                    seconds=seconds, connections=args.connections, label=label,
+                    baseline=f"http://127.0.0.1:{port}", rounds=args.rounds, probe=args.probe,
+                )  # fmt: skip
         finally:
             stop(trivial)
         inline_trivial = report["sqlite_consolidating_inline"].pop("baseline")

@@ -14,6 +14,7 @@ plain functions and constants, imported as ``from tests.helpers import ...``.
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import itertools
 import json
@@ -32,6 +33,7 @@ from typing import Any
 
 import httpx
 import numpy as np
+import pytest
 from prometheus_client import REGISTRY
 
 from routing_svc.demand.network import hotspot_mixture
@@ -39,6 +41,7 @@ from routing_svc.errors import RoutingSvcError
 from routing_svc.network import RoadSpace, load_network
 from routing_svc.network.catalogue import resolve_network
 from routing_svc.sa.space import Assignment, Requirement
+from routing_svc.service import replay_command
 from routing_svc.service.settings import Settings
 from routing_svc.store import (
     BuildGroup,
@@ -267,6 +270,18 @@ def post_batches(
         assert r.status_code == 200, r.text
         results.extend(r.json()["results"])
     return results
+
+
+def replay_report(db_url: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Any:
+    """``routing-svc replay`` of ``db_url`` in process: exit 0, and its JSON report."""
+    args = argparse.Namespace(
+        db=None, database_url=db_url, fleet=[], data_dir=tmp_path / "networks"
+    )
+    capsys.readouterr()
+    code = replay_command.run(args)
+    report = json.loads(capsys.readouterr().out)
+    assert code == 0, report
+    return report
 
 
 def replay_ok(db_url: str, tmp_path: Any) -> dict[str, Any]:

@@ -8,13 +8,13 @@ solved solves it again and applies it later.
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import signal
 import threading
 import time
+from collections.abc import Iterator
 from concurrent.futures import Future
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +25,6 @@ from fastapi.testclient import TestClient
 from routing_svc.network import RoadSpace
 from routing_svc.sa import Fleet, Objective, Vehicle, learning_config
 from routing_svc.sa.consolidation import ConsolidationPolicy
-from routing_svc.service import replay_command
 from routing_svc.service.app import create_app
 from routing_svc.service.background_solver import PendingConsolidation
 from tests.helpers import (
@@ -34,6 +33,7 @@ from tests.helpers import (
     hotspot_stream,
     make_settings,
     post_batches,
+    replay_report,
     spread_fleet_body,
 )
 
@@ -61,17 +61,6 @@ def post_until_consolidated(
         assert time.monotonic() < deadline, "no consolidation was applied"
         time.sleep(0.05)
     raise AssertionError("no consolidation was applied")
-
-
-def replay_report(db_url: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Any:
-    args = argparse.Namespace(
-        db=None, database_url=db_url, fleet=[], data_dir=tmp_path / "networks"
-    )
-    capsys.readouterr()
-    code = replay_command.run(args)
-    report = json.loads(capsys.readouterr().out)
-    assert code == 0, report
-    return report
 
 
 def test_a_consolidation_solved_off_the_write_path_is_applied_later_and_replayed(
@@ -194,7 +183,10 @@ def alive(pid: int) -> bool:
     return state != "Z"
 
 
-def test_no_worker_outlives_its_service_process(tmp_path: Path) -> None:
+@contextmanager
+def solving(tmp_path: Path) -> Iterator[tuple[LiveServer, list[int]]]:
+    """A live server whose fleet just made its first consolidation due, and the worker
+    processes solving it; whatever is left of both is killed afterwards."""
     server = LiveServer(f"sqlite:///{tmp_path / 'events.db'}", tmp_path).start()
     assert server.process is not None
     workers: list[int] = []
@@ -203,41 +195,33 @@ def test_no_worker_outlives_its_service_process(tmp_path: Path) -> None:
         body = {"targets": hotspot_stream(FIRST + 10)}
         httpx.post(server.url + "/v1/fleets/f/targets:batch", json=body, timeout=60)
         deadline = time.monotonic() + PATIENCE_S
-        while not (workers := children(server.process.pid)):  # the solver started
+        while not (found := children(server.process.pid)):  # the solver started
             assert time.monotonic() < deadline, "no worker process started"
             time.sleep(0.1)
+        workers.extend(found)
+        yield server, workers
+    finally:
+        for w in workers:
+            if alive(w):
+                os.kill(w, signal.SIGKILL)
+        server.stop()
+
+
+def test_no_worker_outlives_its_service_process(tmp_path: Path) -> None:
+    with solving(tmp_path) as (server, workers):
+        assert server.process is not None
         os.kill(server.process.pid, signal.SIGKILL)  # the service only, not its group
         server.process.wait(timeout=60)
         deadline = time.monotonic() + PATIENCE_S
         while any(alive(w) for w in workers):
             assert time.monotonic() < deadline, "a worker outlived its service"
             time.sleep(0.1)
-    finally:
-        for w in workers:
-            if alive(w):
-                os.kill(w, signal.SIGKILL)
-        server.stop()
 
 
 def test_a_signal_to_the_service_group_stops_it_cleanly_with_a_solve_in_flight(
     tmp_path: Path,
 ) -> None:
-    server = LiveServer(f"sqlite:///{tmp_path / 'events.db'}", tmp_path).start()
-    assert server.process is not None
-    workers: list[int] = []
-    try:
-        httpx.post(server.url + "/v1/fleets", json=spread_fleet_body("f")).raise_for_status()
-        body = {"targets": hotspot_stream(FIRST + 10)}
-        httpx.post(server.url + "/v1/fleets/f/targets:batch", json=body, timeout=60)
-        deadline = time.monotonic() + PATIENCE_S
-        while not (workers := children(server.process.pid)):
-            assert time.monotonic() < deadline, "no worker process started"
-            time.sleep(0.1)
+    with solving(tmp_path) as (server, workers):
         server.stop()  # SIGTERM to the process group, as Ctrl-C or `timeout` sends it
         assert "failed in its worker" not in server.log.read_text()
         assert not any(alive(w) for w in workers)
-    finally:
-        for w in workers:
-            if alive(w):
-                os.kill(w, signal.SIGKILL)
-        server.stop()

@@ -9,18 +9,20 @@ applies it as recorded. ``test_background_consolidation.py``: solved off it.
 
 from __future__ import annotations
 
-import argparse
-import json
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
 
-from routing_svc.service import replay_command
 from routing_svc.service.app import create_app
-from tests.helpers import hotspot_stream, make_settings, post_batches, spread_fleet_body
+from tests.helpers import (
+    hotspot_stream,
+    make_settings,
+    post_batches,
+    replay_report,
+    spread_fleet_body,
+)
 
 
 class Service:
@@ -55,17 +57,6 @@ def service(db_url: str, tmp_path: Path) -> Iterator[Service]:
     running.start()
     yield running
     running.stop()
-
-
-def replay_report(db_url: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Any:
-    args = argparse.Namespace(
-        db=None, database_url=db_url, fleet=[], data_dir=tmp_path / "networks"
-    )
-    capsys.readouterr()
-    code = replay_command.run(args)
-    report = json.loads(capsys.readouterr().out)
-    assert code == 0, report
-    return report
 
 
 def test_consolidations_are_recorded_survive_a_restart_and_replay(
