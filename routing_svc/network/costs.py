@@ -9,6 +9,8 @@ cost between two positions is defined in :mod:`routing_svc.network.search`;
 from __future__ import annotations
 
 import math
+import threading
+from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -24,6 +26,7 @@ from routing_svc.types import FloatArray, IntArray, NetPosition
 
 __all__ = [
     "CostKind",
+    "DistanceRows",
     "EdgeCosts",
     "check_position",
     "cost_matrix",
@@ -34,6 +37,7 @@ __all__ = [
 CostKind = Literal["length", "time"]
 
 _MATRIX_CELLS = 4_000_000
+_ROW_MEMO_BYTES = 64 * 2**20
 
 
 @dataclass(frozen=True, eq=False)
@@ -174,17 +178,74 @@ def _edge_graph(network: CompiledNetwork, costs: EdgeCosts) -> csr_matrix:
     )
 
 
+class DistanceRows:
+    """Dijkstra rows from edge ends on one network under fixed edge costs, with a bounded memo.
+
+    Row ``e`` holds the cost from the end of edge ``e`` to the end of every edge (arc
+    ``x -> y`` weighs ``cost[y]``). The rows of the most recently used source edges are
+    kept, up to ``max_bytes``: consolidations and checked moves ask again and again for
+    the rows of the same references and sites. Safe to share between threads.
+    """
+
+    def __init__(
+        self, network: CompiledNetwork, costs: EdgeCosts, *, max_bytes: int = _ROW_MEMO_BYTES
+    ) -> None:
+        self._network = network
+        self._costs = costs
+        self._graph: csr_matrix | None = None
+        self._memo: OrderedDict[int, FloatArray] = OrderedDict()
+        self._capacity = max_bytes // (8 * max(network.n_edges, 1))
+        self._lock = threading.Lock()
+
+    def __len__(self) -> int:
+        """Rows held in the memo."""
+        with self._lock:
+            return len(self._memo)
+
+    def rows(self, edges: IntArray) -> FloatArray:
+        """The rows of ``edges``, shape ``(len(edges), n_edges)``."""
+        out = np.empty((edges.shape[0], self._network.n_edges))
+        missing: list[int] = []
+        with self._lock:
+            for k, edge in enumerate(edges.tolist()):
+                row = self._memo.get(edge)
+                if row is None:
+                    missing.append(k)
+                else:
+                    self._memo.move_to_end(edge)
+                    out[k] = row
+        if missing:
+            if self._graph is None:
+                self._graph = _edge_graph(self._network, self._costs)
+            out[missing] = np.atleast_2d(
+                dijkstra(self._graph, directed=True, indices=edges[missing])
+            )
+            if self._capacity == 0:
+                return out
+            with self._lock:
+                for k in missing:
+                    row = out[k].copy()
+                    row.flags.writeable = False
+                    self._memo[int(edges[k])] = row
+                while len(self._memo) > self._capacity:
+                    self._memo.popitem(last=False)
+        return out
+
+
 def cost_matrix(
     network: CompiledNetwork,
     costs: EdgeCosts,
     sources: Sequence[NetPosition],
     targets: Sequence[NetPosition],
+    *,
+    rows: DistanceRows | None = None,
 ) -> FloatArray:
     """Directed shortest-path costs from every source to every target position.
 
     Runs scipy's Dijkstra from each distinct source edge, a chunk of sources at
-    a time, on the graph whose arc ``x -> y`` weighs ``cost[y]``; the cost from
-    the end of edge ``e`` to the start of edge ``t`` is the smallest distance
+    a time, on the graph whose arc ``x -> y`` weighs ``cost[y]`` (or takes the rows
+    from ``rows``, a :class:`DistanceRows` of the same network and costs); the cost
+    from the end of edge ``e`` to the start of edge ``t`` is the smallest distance
     to a predecessor of ``t`` (0 for ``e`` itself).
 
     Returns
@@ -204,6 +265,8 @@ def cost_matrix(
     out = np.empty((src_edge.shape[0], tgt_edge.shape[0]))
     if out.size == 0:
         return out
+    if rows is None:
+        rows = DistanceRows(network, costs, max_bytes=0)  # no memo
     uniq_src, src_row = np.unique(src_edge, return_inverse=True)
     uniq_tgt, tgt_col = np.unique(tgt_edge, return_inverse=True)
     starts = network.rev_indptr[uniq_tgt]
@@ -211,12 +274,10 @@ def cost_matrix(
     gather = np.concatenate([network.rev_indices[a:b] for a, b in zip(starts, stops, strict=True)])
     seg_start = np.concatenate(([0], np.cumsum(stops - starts)[:-1]))
     no_preds = stops == starts
-    graph = _edge_graph(network, costs)
     chunk = max(1, _MATRIX_CELLS // max(network.n_edges, gather.shape[0], 1))
     to_start = np.empty((uniq_src.shape[0], uniq_tgt.shape[0]))
     for lo in range(0, uniq_src.shape[0], chunk):
-        block = dijkstra(graph, directed=True, indices=uniq_src[lo : lo + chunk])
-        block = np.atleast_2d(block)
+        block = rows.rows(uniq_src[lo : lo + chunk])
         if gather.shape[0]:
             reduced = np.minimum.reduceat(
                 block[:, gather], np.minimum(seg_start, gather.shape[0] - 1), axis=1
@@ -228,12 +289,30 @@ def cost_matrix(
     rate = costs.rate
     leave = (network.length[src_edge] - src_off) * rate[src_edge]
     enter = tgt_off * rate[tgt_edge]
-    out[:] = (leave[:, None] + to_start[src_row][:, tgt_col]) + enter[None, :]
-    same = (src_edge[:, None] == tgt_edge[None, :]) & (src_off[:, None] <= tgt_off[None, :])
-    if same.any():
-        rows, cols = np.nonzero(same)
-        out[rows, cols] = (tgt_off[cols] - src_off[rows]) * rate[tgt_edge[cols]]
-    if not np.isfinite(out).all():
+    np.take(to_start[src_row], tgt_col, axis=1, out=out)
+    out += leave[:, None]
+    out += enter[None, :]
+    same_rows, same_cols = _same_edge_pairs(src_edge, src_off, tgt_edge, tgt_off)
+    out[same_rows, same_cols] = (tgt_off[same_cols] - src_off[same_rows]) * rate[
+        tgt_edge[same_cols]
+    ]
+    if not np.isfinite(to_start).all() and not np.isfinite(out).all():
         i, j = (int(v[0]) for v in np.nonzero(~np.isfinite(out)))
         raise Unreachable(f"target {j} cannot be reached from source {i}")
     return out
+
+
+def _same_edge_pairs(
+    src_edge: IntArray, src_off: FloatArray, tgt_edge: IntArray, tgt_off: FloatArray
+) -> tuple[IntArray, IntArray]:
+    """Pairs ``(i, j)`` of a source ``i`` at or before target ``j`` on the same edge: the
+    cost between them runs along that edge alone."""
+    order = np.argsort(tgt_edge, kind="stable")
+    by_edge = tgt_edge[order]
+    first = np.searchsorted(by_edge, src_edge, side="left")
+    counts = np.searchsorted(by_edge, src_edge, side="right") - first
+    pair_rows = np.repeat(np.arange(src_edge.shape[0]), counts)
+    within = np.arange(pair_rows.shape[0]) - np.repeat(np.cumsum(counts) - counts, counts)
+    pair_cols = order[np.repeat(first, counts) + within]
+    ahead = src_off[pair_rows] <= tgt_off[pair_cols]
+    return pair_rows[ahead], pair_cols[ahead]

@@ -12,6 +12,8 @@ a connection costs nothing. See :mod:`routing_svc.network.search`.
 from __future__ import annotations
 
 import functools
+import threading
+from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
@@ -21,6 +23,7 @@ from routing_svc.network.columns import SearchColumns
 from routing_svc.network.compile import CompiledNetwork
 from routing_svc.network.costs import (
     CostKind,
+    DistanceRows,
     EdgeCosts,
     check_position,
     cost_matrix,
@@ -108,6 +111,7 @@ class RoadSpace:
     ) -> None:
         self.network = network
         self._costs = EdgeCosts.free_flow(network, cost)
+        self._rows = DistanceRows(network, self._costs)
         self._buffers = _SharedBuffers(network)
         self._columns = SearchColumns(network, either_way=either_way)
         self._typical: float | None = None
@@ -118,6 +122,7 @@ class RoadSpace:
         space = cls.__new__(cls)
         space.network = parent.network
         space._costs = costs
+        space._rows = DistanceRows(parent.network, costs)
         space._buffers = parent._buffers
         space._columns = parent._columns
         space._typical = None
@@ -299,16 +304,16 @@ class RoadSpace:
     ) -> FloatArray:
         """Directed costs from every source to every target, shape ``(len(sources), len(targets))``.
 
-        Uses scipy's Dijkstra, one run per distinct source edge (see
-        :func:`routing_svc.network.costs.cost_matrix`).
+        Uses scipy's Dijkstra, one run per distinct source edge not among the space's
+        recently used ones (see :func:`routing_svc.network.costs.cost_matrix`).
         """
-        costs = cost_matrix(self.network, self._costs, sources, targets)
+        costs = cost_matrix(self.network, self._costs, sources, targets, rows=self._rows)
         if self.either_way and len(sources):
             twins = [twin(self.network, p) for p in sources]
             rows = [i for i, t in enumerate(twins) if t is not None]
             alternatives = [t for t in twins if t is not None]
             if rows:
-                alt = cost_matrix(self.network, self._costs, alternatives, targets)
+                alt = cost_matrix(self.network, self._costs, alternatives, targets, rows=self._rows)
                 costs[rows] = np.minimum(costs[rows], alt)
         return costs
 
@@ -558,7 +563,33 @@ def _requirement_arrays(requirement: Requirement, n_vehicles: int) -> tuple[IntA
     return groups, counts
 
 
+_REBUILT_KEPT = 4
+"""Spaces a process keeps of those it unpickled (:func:`_rebuilt`)."""
+
+_rebuilt_spaces: OrderedDict[tuple[str, str, str, bool], list[RoadSpace]] = OrderedDict()
+_rebuilt_lock = threading.Lock()
+
+
 def _rebuilt(network: CompiledNetwork, costs: EdgeCosts, either_way: bool) -> RoadSpace:
-    """A pickled :class:`RoadSpace` (:meth:`RoadSpace.__reduce__`)."""
-    space = RoadSpace(network, cost=costs.kind, either_way=either_way)
-    return RoadSpace._derived(space, costs)
+    """A pickled :class:`RoadSpace` (:meth:`RoadSpace.__reduce__`).
+
+    A process that unpickles the same network, costs and turning rule again (a
+    consolidation worker, job after job) gets the space it built the first time, with
+    the rows it has memoised.
+    """
+    key = (network.source_sha256, network.vclass, costs.kind, either_way)
+    with _rebuilt_lock:
+        for kept in _rebuilt_spaces.get(key, []):
+            if np.array_equal(kept.edge_costs.cost, costs.cost):
+                _rebuilt_spaces.move_to_end(key)
+                return kept
+    space = RoadSpace._derived(RoadSpace(network, cost=costs.kind, either_way=either_way), costs)
+    with _rebuilt_lock:
+        _rebuilt_spaces.setdefault(key, []).append(space)
+        _rebuilt_spaces.move_to_end(key)
+        while sum(len(v) for v in _rebuilt_spaces.values()) > _REBUILT_KEPT:
+            oldest = next(iter(_rebuilt_spaces))
+            _rebuilt_spaces[oldest].pop(0)
+            if not _rebuilt_spaces[oldest]:
+                del _rebuilt_spaces[oldest]
+    return space

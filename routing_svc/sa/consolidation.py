@@ -362,7 +362,9 @@ def consolidate(
         actual = _stand_rows(space, stands, positions)
         current = _padded(actual, opened, len(sites))
         anchored = _padded(_stand_rows(space, stands, anchor), opened, len(sites))
-    costs = (np.asarray(space.cost_matrix(sites, targets), dtype=np.float64) / speed) ** power
+    costs = np.array(space.cost_matrix(sites, targets), dtype=np.float64)
+    costs /= speed
+    costs **= power
     now = costs[actual].min(axis=0)
     differences, weights, tested_now = [], [], []
     for part, test in zip(parts, tests, strict=True):

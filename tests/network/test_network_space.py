@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import json
+import pickle
 
 import numpy as np
 import pytest
 
 from routing_svc.errors import InvalidInput, UnknownEdge
 from routing_svc.network import RoadSpace
+from routing_svc.network.costs import DistanceRows
 from routing_svc.sa.space import Requirement
 from routing_svc.types import NetPosition
 from tests.network.conftest import NetCase
@@ -44,6 +46,41 @@ def test_cost_matrix_matches_path_costs(case: NetCase, space: RoadSpace) -> None
     np.testing.assert_allclose(matrix, expected, rtol=RTOL, atol=1e-9)
     assert matrix[0, 30] == 0.0
     assert space.cost_matrix([], targets).shape == (0, 32)
+
+
+def test_cost_matrix_rows_from_the_memo_match_path_costs(case: NetCase) -> None:
+    """A second matrix over the same sources takes its rows from the memo; a memo
+    too small for them evicts and computes again; both equal the compiled search."""
+    rng = np.random.default_rng(26)
+    sources = case.random_positions(rng, 25)
+    first_targets = case.random_positions(rng, 10)
+    targets = [*case.random_positions(rng, 20), sources[2], NetPosition(sources[3].edge, 0.0)]
+    expected = np.array(
+        [[RoadSpace(case.network).path_cost(s, t) for t in targets] for s in sources]
+    )
+    space = RoadSpace(case.network)
+    space.cost_matrix(sources, first_targets)
+    np.testing.assert_allclose(space.cost_matrix(sources, targets), expected, rtol=RTOL, atol=1e-9)
+    edges = np.array(sorted({s.edge for s in sources}), dtype=np.int64)
+    tiny = DistanceRows(case.network, space.edge_costs, max_bytes=3 * 8 * case.network.n_edges)
+    uncached = DistanceRows(case.network, space.edge_costs, max_bytes=0).rows(edges)
+    for _ in range(2):
+        np.testing.assert_array_equal(tiny.rows(edges), uncached)
+        np.testing.assert_array_equal(tiny.rows(edges[::-1]), uncached[::-1])
+    assert len(tiny) == 3
+
+
+def test_a_space_with_new_travel_times_does_not_reuse_old_rows(drt_case: NetCase) -> None:
+    net = drt_case.network
+    rng = np.random.default_rng(27)
+    sources = drt_case.random_positions(rng, 20)
+    targets = drt_case.random_positions(rng, 20)
+    space = RoadSpace(net, cost="time")
+    before = space.cost_matrix(sources, targets)
+    slow = {net.edge_ids[e]: float(net.length[e] / net.speed[e] * 10.0) for e in range(net.n_edges)}
+    slower = space.with_travel_times(slow)
+    np.testing.assert_allclose(slower.cost_matrix(sources, targets), before * 10.0, rtol=RTOL)
+    np.testing.assert_array_equal(space.cost_matrix(sources, targets), before)
 
 
 def test_one_way_streets_make_costs_directed(oneway_case: NetCase) -> None:
@@ -284,3 +321,24 @@ def test_advance_matches_a_numpy_walk_bit_for_bit(case: NetCase) -> None:
                 moved = space.advance(position, target, route, amount)
                 assert moved == expected
                 assert type(moved.edge) is int and type(moved.offset) is float
+
+
+def test_an_unpickled_space_is_kept_for_the_same_network_and_costs(drt_case: NetCase) -> None:
+    """A worker that unpickles job after job keeps one space, and its memoised rows, per
+    network, costs and turning rule; other travel times give another space."""
+    net = drt_case.network
+    rng = np.random.default_rng(28)
+    sources, targets = drt_case.random_positions(rng, 10), drt_case.random_positions(rng, 10)
+    space = RoadSpace(net, cost="time")
+    first = pickle.loads(pickle.dumps(space))
+    assert pickle.loads(pickle.dumps(space)) is first
+    slower = space.with_travel_times({net.edge_ids[0]: float(net.length[0] / net.speed[0] * 3)})
+    other = pickle.loads(pickle.dumps(slower))
+    assert other is not first
+    np.testing.assert_array_equal(other.edge_costs.cost, slower.edge_costs.cost)
+    np.testing.assert_array_equal(
+        first.cost_matrix(sources, targets), space.cost_matrix(sources, targets)
+    )
+    np.testing.assert_array_equal(
+        other.cost_matrix(sources, targets), slower.cost_matrix(sources, targets)
+    )
