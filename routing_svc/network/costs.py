@@ -179,12 +179,15 @@ def _edge_graph(network: CompiledNetwork, costs: EdgeCosts) -> csr_matrix:
 
 
 class DistanceRows:
-    """Dijkstra rows from edge ends on one network under fixed edge costs, with a bounded memo.
+    """Shortest-path rows from edge ends on one network under fixed edge costs, with a
+    bounded memo.
 
-    Row ``e`` holds the cost from the end of edge ``e`` to the end of every edge (arc
-    ``x -> y`` weighs ``cost[y]``). The rows of the most recently used source edges are
-    kept, up to ``max_bytes``: consolidations and checked moves ask again and again for
-    the rows of the same references and sites. Safe to share between threads.
+    Row ``e`` holds the cost from the end of edge ``e`` to the start of every edge: the
+    smallest Dijkstra distance (arc ``x -> y`` weighs ``cost[y]``) to one of its
+    predecessors, ``inf`` for an edge without one. The rows of the most recently used
+    source edges are kept, up to ``max_bytes``: consolidations and checked moves ask
+    again and again for the rows of the same references and sites. Safe to share
+    between threads.
     """
 
     def __init__(
@@ -217,8 +220,8 @@ class DistanceRows:
         if missing:
             if self._graph is None:
                 self._graph = _edge_graph(self._network, self._costs)
-            out[missing] = np.atleast_2d(
-                dijkstra(self._graph, directed=True, indices=edges[missing])
+            out[missing] = self._to_starts(
+                np.atleast_2d(dijkstra(self._graph, directed=True, indices=edges[missing]))
             )
             if self._capacity == 0:
                 return out
@@ -229,6 +232,17 @@ class DistanceRows:
                     self._memo[int(edges[k])] = row
                 while len(self._memo) > self._capacity:
                     self._memo.popitem(last=False)
+        return out
+
+    def _to_starts(self, to_ends: FloatArray) -> FloatArray:
+        """Distances to the ends of edges made distances to their starts."""
+        indptr, preds = self._network.rev_indptr, self._network.rev_indices
+        if preds.shape[0] == 0:
+            return np.full_like(to_ends, np.inf)
+        out = np.minimum.reduceat(
+            to_ends[:, preds], np.minimum(indptr[:-1], preds.shape[0] - 1), axis=1
+        )
+        out[:, indptr[:-1] == indptr[1:]] = np.inf
         return out
 
 
@@ -242,11 +256,10 @@ def cost_matrix(
 ) -> FloatArray:
     """Directed shortest-path costs from every source to every target position.
 
-    Runs scipy's Dijkstra from each distinct source edge, a chunk of sources at
-    a time, on the graph whose arc ``x -> y`` weighs ``cost[y]`` (or takes the rows
-    from ``rows``, a :class:`DistanceRows` of the same network and costs); the cost
-    from the end of edge ``e`` to the start of edge ``t`` is the smallest distance
-    to a predecessor of ``t`` (0 for ``e`` itself).
+    The cost from the end of each distinct source edge to the start of each target
+    edge comes from :class:`DistanceRows` (``rows``, of the same network and costs;
+    without it, scipy's Dijkstra runs from every source edge), a chunk of sources at a
+    time; the parts along the source's and the target's edges are added.
 
     Returns
     -------
@@ -269,23 +282,12 @@ def cost_matrix(
         rows = DistanceRows(network, costs, max_bytes=0)  # no memo
     uniq_src, src_row = np.unique(src_edge, return_inverse=True)
     uniq_tgt, tgt_col = np.unique(tgt_edge, return_inverse=True)
-    starts = network.rev_indptr[uniq_tgt]
-    stops = network.rev_indptr[uniq_tgt + 1]
-    gather = np.concatenate([network.rev_indices[a:b] for a, b in zip(starts, stops, strict=True)])
-    seg_start = np.concatenate(([0], np.cumsum(stops - starts)[:-1]))
-    no_preds = stops == starts
-    chunk = max(1, _MATRIX_CELLS // max(network.n_edges, gather.shape[0], 1))
+    chunk = max(1, _MATRIX_CELLS // max(network.n_edges, 1))
     to_start = np.empty((uniq_src.shape[0], uniq_tgt.shape[0]))
     for lo in range(0, uniq_src.shape[0], chunk):
-        block = rows.rows(uniq_src[lo : lo + chunk])
-        if gather.shape[0]:
-            reduced = np.minimum.reduceat(
-                block[:, gather], np.minimum(seg_start, gather.shape[0] - 1), axis=1
-            )
-        else:
-            reduced = np.full((block.shape[0], uniq_tgt.shape[0]), np.inf)
-        reduced[:, no_preds] = np.inf
-        to_start[lo : lo + chunk] = reduced
+        np.take(
+            rows.rows(uniq_src[lo : lo + chunk]), uniq_tgt, axis=1, out=to_start[lo : lo + chunk]
+        )
     rate = costs.rate
     leave = (network.length[src_edge] - src_off) * rate[src_edge]
     enter = tgt_off * rate[tgt_edge]

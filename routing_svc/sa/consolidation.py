@@ -528,13 +528,21 @@ def _distinct(rows: IntArray, n_sites: int) -> IntArray:
 
 
 def best_fit(costs: FloatArray, weight: FloatArray, starts: list[IntArray]) -> IntArray:
-    """The best local optimum for ``weight`` from each start and from greedy addition."""
+    """The best local optimum for ``weight`` from each start and from greedy addition.
+
+    The searches see only the targets of positive weight (a fold's left-out targets
+    add exact zeros to every sum they would enter).
+    """
     p = starts[0].size
     distinct = [
         s for k, s in enumerate(starts) if not any(np.array_equal(s, t) for t in starts[:k])
     ]
-    candidates = [fast_interchange(costs, weight, s) for s in distinct]
-    candidates.append(fast_interchange(costs, weight, greedy(costs, weight, p)))
+    weighed = weight > 0.0
+    seen, seen_weight = costs, weight
+    if not weighed.all():
+        seen, seen_weight = np.compress(weighed, costs, axis=1), weight[weighed]
+    candidates = [fast_interchange(seen, seen_weight, s) for s in distinct]
+    candidates.append(fast_interchange(seen, seen_weight, greedy(seen, seen_weight, p)))
     values = [_total(costs, weight, c) for c in candidates]
     return candidates[int(np.argmin(values))]
 
