@@ -10,7 +10,9 @@ it, if it is still the due one, and that target's event records it, so that repl
 applies it at the same place without solving (:mod:`routing_svc.service.runtime`).
 Targets that come faster than it is solved wait for it once half the period that
 follows it has passed (:meth:`~routing_svc.sa.consolidation.ConsolidationPolicy.apply_by`),
-so that a burst of targets does not outrun the schedule.
+so that a burst of targets does not outrun the schedule; the write path keeps such a
+fleet's writes queued meanwhile (:meth:`PendingConsolidation.holds`) and goes on with
+the other fleets'.
 
 Processes, not threads: the solve (scipy's Dijkstra, the compiled interchange) holds
 the GIL, and a thread would stall the write path as much as solving inline.
@@ -26,7 +28,7 @@ import threading
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Generic
 
 from routing_svc.sa.consolidation import Consolidation, ConsolidationJob, ConsolidationKey
@@ -110,10 +112,22 @@ class PendingConsolidation(Generic[P]):
 
     job: ConsolidationJob[P]
     answer: Future[Consolidation[P]]
+    submitted: float = field(default_factory=time.monotonic)
 
     @property
     def key(self) -> ConsolidationKey:
         return self.job.key
+
+    def holds(self, targets: int) -> bool:
+        """Whether a target that comes when the fleet has seen ``targets`` would wait for
+        this solve (:meth:`solved`): it is not finished, ``targets >= job.apply_by``, and
+        it has run less than :data:`LONGEST_WAIT_S`. The write path then leaves the
+        fleet's writes queued, and serves the other fleets meanwhile."""
+        return (
+            targets >= self.job.apply_by
+            and not self.answer.done()
+            and time.monotonic() - self.submitted < LONGEST_WAIT_S
+        )
 
     def solved(self, targets: int) -> tuple[ConsolidationKey, Consolidation[P]] | None:
         """The answer when it is ready (``None`` before), waited for once the fleet has

@@ -15,6 +15,7 @@ import hashlib
 import json
 import threading
 from collections.abc import Iterator, Sequence
+from concurrent.futures import Future
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -141,6 +142,12 @@ class FleetService:
         before it joins the queue)."""
         runtime = self._cache.get(fleet_id)
         return runtime is not None and not runtime.deleted
+
+    def consolidation_wait(self, fleet_id: str, targets_ahead: int) -> Future[Any] | None:
+        """The solve the fleet's next ``targets_ahead`` targets would wait for, if its
+        runtime is in memory (:meth:`FleetRuntime.consolidation_wait`)."""
+        runtime = self._cache.get(fleet_id)
+        return None if runtime is None else runtime.consolidation_wait(targets_ahead)
 
     def runtime_for_write(self, fleet_id: str) -> FleetRuntime:
         """The fleet's runtime, loaded if it is not in memory, not caught up with the

@@ -27,6 +27,7 @@ from __future__ import annotations
 import json
 from collections import deque
 from collections.abc import Sequence
+from concurrent.futures import Future
 from typing import Any
 
 from routing_svc.demand import DemandDistribution
@@ -152,6 +153,15 @@ class FleetRuntime:
         self.recent.append(d.cost)
         self.levels.record(d.cost if d.sent is None else d.sent.completion)
         return payload, result
+
+    def consolidation_wait(self, targets_ahead: int) -> Future[Any] | None:
+        """The solve that the fleet's next ``targets_ahead`` targets could wait for
+        (:meth:`PendingConsolidation.holds`; the last of them comes when the fleet has seen
+        ``targets_ahead - 1`` more), else ``None``."""
+        pending = self._pending
+        if pending is None or not pending.holds(self.fleet.state.targets + targets_ahead - 1):
+            return None
+        return pending.answer
 
     def _hand_over_due(self) -> None:
         """Drop a job that was applied or went stale; hand the due consolidation, if

@@ -32,6 +32,11 @@ committed on their own, so one fleet's trouble cannot fail another's
 requests; a cache that may have diverged (an append that failed after
 computing) is dropped and rebuilt from the log.
 
+A fleet whose next targets would wait for its consolidation's solve (solved in a
+worker process, :mod:`~routing_svc.service.background_solver`) is held: its requests
+stay queued, in order, and the writers take the other fleets' meanwhile; the solve's
+end wakes them. So one fleet's wait never holds another fleet or the event loop.
+
 The domain provides the fleets' runtimes and locks (:class:`FleetRuntimes`);
 it knows nothing else of how its requests are written.
 """
@@ -42,8 +47,9 @@ import asyncio
 import threading
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import ExitStack, contextmanager
-from typing import Protocol
+from concurrent.futures import Future
+from contextlib import ExitStack, contextmanager, suppress
+from typing import Any, Protocol
 
 from prometheus_client import Counter, Histogram
 
@@ -66,6 +72,10 @@ from routing_svc.service.write_path.pending import (
 from routing_svc.store import EventLog, EventRecord, FleetGroup, GroupItem, NewEvent
 
 __all__ = ["SNAPSHOT_EVERY", "FleetRuntimes", "GroupCommit"]
+
+HELD_RECHECK_S = 1.0
+"""How often a writer looks again at fleets it holds back for their consolidation (their
+solve's end wakes it anyway)."""
 
 SNAPSHOT_EVERY = 64
 """A snapshot of a small fleet's state is stored whenever its version crosses a multiple
@@ -93,6 +103,11 @@ class FleetRuntimes(Protocol):
 
     def is_cached(self, fleet_id: str) -> bool:
         """Whether the fleet's runtime is in memory."""
+        ...
+
+    def consolidation_wait(self, fleet_id: str, targets_ahead: int) -> Future[Any] | None:
+        """The consolidation solve that the fleet's next ``targets_ahead`` targets would
+        wait for, ``None`` if none (or the fleet is not in memory)."""
         ...
 
     def runtime_for_write(self, fleet_id: str) -> FleetRuntime:
@@ -194,7 +209,10 @@ class GroupCommit:
         # the event loop's writer (see the module's docstring)
         self._loop_queue: deque[QueuedWrite] = deque()
         self._loop_drain: asyncio.Task[None] | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
         self._committer: Committer | None = None
+        self._watched: set[Future[Any]] = set()
+        self._hold_none = False
 
     @property
     def committer(self) -> Committer | None:
@@ -244,6 +262,7 @@ class GroupCommit:
             if self._closed:
                 raise StorageError("the fleet service is shut down")
             self._loop_queue.append(mine)
+            self._loop = loop
             if self._loop_drain is None:
                 self._loop_drain = loop.create_task(self._drain_on_loop())
             return mine.future
@@ -337,9 +356,47 @@ class GroupCommit:
 
     async def drain(self) -> None:
         """Wait until the event loop's writer has committed everything queued to it (its
-        errors went to the requests' answers)."""
-        while self._loop_drain is not None:
-            await asyncio.wait({self._loop_drain})
+        errors went to the requests' answers), fleets held for their consolidation
+        included."""
+        self._hold_none = True
+        try:
+            self._restart_loop_drain()
+            while self._loop_drain is not None:
+                await asyncio.wait({self._loop_drain})
+                self._restart_loop_drain()
+        finally:
+            self._hold_none = False
+
+    # -- fleets held for their consolidation -----------------------------------------
+
+    def _holds(self, fleet_id: str, events_ahead: int) -> bool:
+        """Whether the fleet's queued writes wait for its consolidation's solve
+        (:meth:`FleetRuntimes.consolidation_wait`); its end wakes the writers."""
+        if self._closed or self._hold_none:
+            return False
+        answer = self.runtimes.consolidation_wait(fleet_id, events_ahead)
+        if answer is None:
+            return False
+        if answer not in self._watched:
+            self._watched.add(answer)
+            answer.add_done_callback(self._wake)
+        return True
+
+    def _wake(self, answer: Future[Any]) -> None:
+        """A solve ended: the writers take the writes held for it."""
+        self._watched.discard(answer)
+        with self._queue_cond:
+            self._queue_cond.notify()
+        loop = self._loop
+        if loop is not None and self._loop_queue:
+            with suppress(RuntimeError):  # a closed loop writes no more
+                loop.call_soon_threadsafe(self._restart_loop_drain)
+
+    def _restart_loop_drain(self) -> None:
+        """Start the event loop's writer again if it stopped with writes queued (called
+        on the loop's thread)."""
+        if self._loop_queue and self._loop_drain is None and self._loop is not None:
+            self._loop_drain = self._loop.create_task(self._drain_on_loop())
 
     # -- the event loop's writer --------------------------------------------------
 
@@ -347,7 +404,10 @@ class GroupCommit:
         """Commit the event loop's queue, group after group, until it is empty."""
         try:
             while self._loop_queue:
-                batch = take_batch(self._loop_queue)
+                batch = take_batch(self._loop_queue, self._holds)
+                if not batch:  # every fleet queued here waits for its consolidation
+                    asyncio.get_running_loop().call_later(HELD_RECHECK_S, self._restart_loop_drain)
+                    break
                 try:
                     await self._commit_on_loop(batch)
                 except BaseException as exc:  # never leave a caller waiting
@@ -426,11 +486,13 @@ class GroupCommit:
     def _write_loop(self) -> None:
         while True:
             with self._queue_cond:
-                while not self._queue and not self._closed:
-                    self._queue_cond.wait()
-                if not self._queue:
+                while True:
+                    batch = take_batch(self._queue, self._holds) if self._queue else []
+                    if batch or (self._closed and not self._queue):
+                        break
+                    self._queue_cond.wait(HELD_RECHECK_S if self._queue else None)
+                if not batch:
                     return
-                batch = take_batch(self._queue)
             try:
                 self._commit(batch)
             except BaseException as exc:  # never leave a caller waiting

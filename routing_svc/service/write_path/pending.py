@@ -21,6 +21,7 @@ __all__ = [
     "GROUP_CAP",
     "Answer",
     "Compute",
+    "Holds",
     "PendingAnswer",
     "QueuedWrite",
     "fail_unfinished",
@@ -129,14 +130,39 @@ def _set_future(future: PendingAnswer, answer: Answer | None, error: BaseExcepti
         future.set_result(answer)  # type: ignore[arg-type]
 
 
-def take_batch(queue: deque[QueuedWrite]) -> list[QueuedWrite]:
+Holds = Callable[[str, int], bool]
+"""``holds(fleet_id, events_ahead)``: whether a fleet's request that brings its events in
+the batch to ``events_ahead`` must stay queued for now."""
+
+
+def take_batch(queue: deque[QueuedWrite], holds: Holds | None = None) -> list[QueuedWrite]:
     """Take the next batch from a non-empty ``queue``: its oldest requests, up to
-    :data:`GROUP_CAP` events (at least one request)."""
-    batch = [queue.popleft()]
-    total = batch[0].size
-    while queue and total + queue[0].size <= GROUP_CAP:
-        total += queue[0].size
-        batch.append(queue.popleft())
+    :data:`GROUP_CAP` events.
+
+    A fleet that ``holds`` keeps that request and every later one of its own queued,
+    in order, while the other fleets' requests are taken. The batch holds at least one
+    request unless every fleet queued is held.
+    """
+    batch: list[QueuedWrite] = []
+    total = 0
+    ahead: dict[str, int] = {}
+    held: list[QueuedWrite] = []
+    held_fleets: set[str] = set()
+    while queue:
+        pending = queue[0]
+        if batch and total + pending.size > GROUP_CAP:
+            break
+        queue.popleft()
+        fleet_id = pending.fleet_id
+        events = ahead.get(fleet_id, 0) + pending.size
+        if holds is not None and (fleet_id in held_fleets or holds(fleet_id, events)):
+            held_fleets.add(fleet_id)
+            held.append(pending)
+            continue
+        ahead[fleet_id] = events
+        batch.append(pending)
+        total += pending.size
+    queue.extendleft(reversed(held))
     return batch
 
 
