@@ -193,8 +193,8 @@ class DistanceRows:
     def __init__(
         self, network: CompiledNetwork, costs: EdgeCosts, *, max_bytes: int = _ROW_MEMO_BYTES
     ) -> None:
-        self._network = network
-        self._costs = costs
+        self.network = network
+        self.costs = costs
         self._graph: csr_matrix | None = None
         self._memo: OrderedDict[int, FloatArray] = OrderedDict()
         self._capacity = max_bytes // (8 * max(network.n_edges, 1))
@@ -207,7 +207,7 @@ class DistanceRows:
 
     def rows(self, edges: IntArray) -> FloatArray:
         """The rows of ``edges``, shape ``(len(edges), n_edges)``."""
-        out = np.empty((edges.shape[0], self._network.n_edges))
+        out = np.empty((edges.shape[0], self.network.n_edges))
         missing: list[int] = []
         with self._lock:
             for k, edge in enumerate(edges.tolist()):
@@ -219,7 +219,7 @@ class DistanceRows:
                     out[k] = row
         if missing:
             if self._graph is None:
-                self._graph = _edge_graph(self._network, self._costs)
+                self._graph = _edge_graph(self.network, self.costs)
             out[missing] = self._to_starts(
                 np.atleast_2d(dijkstra(self._graph, directed=True, indices=edges[missing]))
             )
@@ -236,7 +236,7 @@ class DistanceRows:
 
     def _to_starts(self, to_ends: FloatArray) -> FloatArray:
         """Distances to the ends of edges made distances to their starts."""
-        indptr, preds = self._network.rev_indptr, self._network.rev_indices
+        indptr, preds = self.network.rev_indptr, self.network.rev_indices
         if preds.shape[0] == 0:
             return np.full_like(to_ends, np.inf)
         out = np.minimum.reduceat(
@@ -247,19 +247,14 @@ class DistanceRows:
 
 
 def cost_matrix(
-    network: CompiledNetwork,
-    costs: EdgeCosts,
-    sources: Sequence[NetPosition],
-    targets: Sequence[NetPosition],
-    *,
-    rows: DistanceRows | None = None,
+    rows: DistanceRows, sources: Sequence[NetPosition], targets: Sequence[NetPosition]
 ) -> FloatArray:
-    """Directed shortest-path costs from every source to every target position.
+    """Directed shortest-path costs from every source to every target position, on the
+    network and under the edge costs of ``rows``.
 
     The cost from the end of each distinct source edge to the start of each target
-    edge comes from :class:`DistanceRows` (``rows``, of the same network and costs;
-    without it, scipy's Dijkstra runs from every source edge), a chunk of sources at a
-    time; the parts along the source's and the target's edges are added.
+    edge comes from ``rows``, a chunk of sources at a time; the parts along the
+    source's and the target's edges are added.
 
     Returns
     -------
@@ -273,13 +268,12 @@ def cost_matrix(
     Unreachable
         If some target cannot be reached from some source.
     """
+    network, costs = rows.network, rows.costs
     src_edge, src_off = position_arrays(network, sources, what="source")
     tgt_edge, tgt_off = position_arrays(network, targets, what="target")
     out = np.empty((src_edge.shape[0], tgt_edge.shape[0]))
     if out.size == 0:
         return out
-    if rows is None:
-        rows = DistanceRows(network, costs, max_bytes=0)  # no memo
     uniq_src, src_row = np.unique(src_edge, return_inverse=True)
     uniq_tgt, tgt_col = np.unique(tgt_edge, return_inverse=True)
     chunk = max(1, _MATRIX_CELLS // max(network.n_edges, 1))

@@ -307,13 +307,13 @@ class RoadSpace:
         Uses scipy's Dijkstra, one run per distinct source edge not among the space's
         recently used ones (see :func:`routing_svc.network.costs.cost_matrix`).
         """
-        costs = cost_matrix(self.network, self._costs, sources, targets, rows=self._rows)
+        costs = cost_matrix(self._rows, sources, targets)
         if self.either_way and len(sources):
             twins = [twin(self.network, p) for p in sources]
             rows = [i for i, t in enumerate(twins) if t is not None]
             alternatives = [t for t in twins if t is not None]
             if rows:
-                alt = cost_matrix(self.network, self._costs, alternatives, targets, rows=self._rows)
+                alt = cost_matrix(self._rows, alternatives, targets)
                 costs[rows] = np.minimum(costs[rows], alt)
         return costs
 
@@ -566,7 +566,7 @@ def _requirement_arrays(requirement: Requirement, n_vehicles: int) -> tuple[IntA
 _REBUILT_KEPT = 4
 """Spaces a process keeps of those it unpickled (:func:`_rebuilt`)."""
 
-_rebuilt_spaces: OrderedDict[tuple[str, str, str, bool], list[RoadSpace]] = OrderedDict()
+_rebuilt_spaces: OrderedDict[tuple[str, str, str, bool, bytes], RoadSpace] = OrderedDict()
 _rebuilt_lock = threading.Lock()
 
 
@@ -577,19 +577,15 @@ def _rebuilt(network: CompiledNetwork, costs: EdgeCosts, either_way: bool) -> Ro
     consolidation worker, job after job) gets the space it built the first time, with
     the rows it has memoised.
     """
-    key = (network.source_sha256, network.vclass, costs.kind, either_way)
+    key = (network.source_sha256, network.vclass, costs.kind, either_way, costs.cost.tobytes())
     with _rebuilt_lock:
-        for kept in _rebuilt_spaces.get(key, []):
-            if np.array_equal(kept.edge_costs.cost, costs.cost):
-                _rebuilt_spaces.move_to_end(key)
-                return kept
+        kept = _rebuilt_spaces.get(key)
+        if kept is not None:
+            _rebuilt_spaces.move_to_end(key)
+            return kept
     space = RoadSpace._derived(RoadSpace(network, cost=costs.kind, either_way=either_way), costs)
     with _rebuilt_lock:
-        _rebuilt_spaces.setdefault(key, []).append(space)
-        _rebuilt_spaces.move_to_end(key)
-        while sum(len(v) for v in _rebuilt_spaces.values()) > _REBUILT_KEPT:
-            oldest = next(iter(_rebuilt_spaces))
-            _rebuilt_spaces[oldest].pop(0)
-            if not _rebuilt_spaces[oldest]:
-                del _rebuilt_spaces[oldest]
+        _rebuilt_spaces[key] = space
+        while len(_rebuilt_spaces) > _REBUILT_KEPT:
+            _rebuilt_spaces.popitem(last=False)
     return space

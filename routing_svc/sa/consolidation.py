@@ -362,7 +362,7 @@ def consolidate(
         actual = _stand_rows(space, stands, positions)
         current = _padded(actual, opened, len(sites))
         anchored = _padded(_stand_rows(space, stands, anchor), opened, len(sites))
-    costs = np.array(space.cost_matrix(sites, targets), dtype=np.float64)
+    costs = np.asarray(space.cost_matrix(sites, targets), dtype=np.float64)  # a new matrix
     costs /= speed
     costs **= power
     now = costs[actual].min(axis=0)

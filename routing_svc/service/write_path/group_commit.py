@@ -263,8 +263,7 @@ class GroupCommit:
                 raise StorageError("the fleet service is shut down")
             self._loop_queue.append(mine)
             self._loop = loop
-            if self._loop_drain is None:
-                self._loop_drain = loop.create_task(self._drain_on_loop())
+            self._restart_loop_drain()
             return mine.future
         with self._queue_cond:
             if self._closed:
@@ -393,8 +392,8 @@ class GroupCommit:
                 loop.call_soon_threadsafe(self._restart_loop_drain)
 
     def _restart_loop_drain(self) -> None:
-        """Start the event loop's writer again if it stopped with writes queued (called
-        on the loop's thread)."""
+        """Start the event loop's writer unless it runs or has nothing queued (called on
+        the loop's thread)."""
         if self._loop_queue and self._loop_drain is None and self._loop is not None:
             self._loop_drain = self._loop.create_task(self._drain_on_loop())
 
