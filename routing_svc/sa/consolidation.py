@@ -13,7 +13,8 @@ candidate references of the sample (its targets and the ends of their edges,
 Hakimi's finite dominating set; at most :data:`MAX_SITE_TARGETS` of its targets)
 by greedy addition and Whitaker's fast
 interchange (:mod:`routing_svc.sa.interchange`), started from the current
-references, from the last accepted ones and from scratch.
+references, from the last accepted ones and from scratch; the solve that is taken
+goes on by variable neighbourhood search.
 
 A p-median of ``m`` targets fits their noise: taken blindly it would pull a
 fleet that already stands at the optimum away from it. So the reservoir is
@@ -31,7 +32,10 @@ has seen them.
 
 Consolidations follow the demand's clock: ``first`` targets into an *epoch*, then
 each time the targets seen in the epoch have grown by the factor ``growth``, the
-period capped at ``longest``. The mean cost of
+period capped at ``longest``; and each time the targets since the references were
+last replaced have grown by that factor, that period capped at ``slowest``, so that a
+fleet whose consolidations keep being turned down (it has learnt a demand that
+stays) consolidates ever more rarely. The mean cost of
 each block of targets is compared with the mean cost expected of the references
 at the last consolidation; a block that costs ``shift_ratio`` times more starts a
 new epoch (the demand moved): the reservoir keeps that block only and the
@@ -52,7 +56,7 @@ from typing import Any, Generic, Protocol, runtime_checkable
 import numpy as np
 
 from routing_svc.errors import InvalidInput
-from routing_svc.sa.interchange import fast_interchange, greedy
+from routing_svc.sa.interchange import fast_interchange, greedy, neighbourhood_search
 from routing_svc.sa.space import P
 from routing_svc.sa.stands import StandSet, capacitated_sites, open_count, stand_assignment
 from routing_svc.types import FloatArray, IntArray
@@ -72,12 +76,15 @@ class ConsolidationPolicy:
     reservoir : int
         The most recent targets kept (any one vehicle required).
     first : int
-        Targets into an epoch of the first consolidation; the period then doubles.
+        Targets into an epoch of the first consolidation.
     growth : float
         Each period is ``growth - 1`` times the targets seen in the epoch (at least
         ``first``).
     longest : int
-        The longest period between two consolidations.
+        The longest period of the epoch's clock.
+    slowest : int
+        The longest period of the clock since the references were last replaced
+        (at least ``longest``); a period is the longer of the two clocks'.
     folds : int
         Folds of the cross-validated test.
     confidence : float
@@ -100,12 +107,18 @@ class ConsolidationPolicy:
         A held step that would move a reference is taken only if it lowers the
         reservoir's mean cost (:func:`move_pays`), so that a jump of ``J`` that the
         step's direction does not see is never paid blindly.
+    shakes : int
+        The accepted solve goes on from its best local optimum by variable
+        neighbourhood search until this many shakes in a row found nothing better
+        (:func:`routing_svc.sa.interchange.neighbourhood_search`); 0: the local
+        optimum is kept.
     """
 
     reservoir: int = 4000
     first: int = 250
-    growth: float = 1.5
+    growth: float = 1.25
     longest: int = 4000
+    slowest: int = 32000
     folds: int = 4
     confidence: float = 0.0
     block: int = 250
@@ -113,12 +126,17 @@ class ConsolidationPolicy:
     refit: float | None = 1.5
     fresh_baseline: bool = True
     checked_moves: bool = True
+    shakes: int = 20
 
     def __post_init__(self) -> None:
         for name in ("reservoir", "first", "longest", "block", "folds"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 2:
                 raise InvalidInput(f"consolidation {name} must be an integer >= 2, got {value!r}")
+        if isinstance(self.slowest, bool) or not isinstance(self.slowest, int):
+            raise InvalidInput(f"consolidation slowest must be an integer, got {self.slowest!r}")
+        if self.slowest < self.longest:
+            raise InvalidInput("consolidation slowest must be at least longest")
         if self.block > self.reservoir:
             raise InvalidInput("the consolidation block must fit in the reservoir")
         if not (math.isfinite(self.growth) and self.growth > 1.0):
@@ -134,6 +152,8 @@ class ConsolidationPolicy:
             and self.refit > 1.0
         ):
             raise InvalidInput("consolidation refit must be a finite number > 1, or null")
+        if isinstance(self.shakes, bool) or not isinstance(self.shakes, int) or self.shakes < 0:
+            raise InvalidInput(f"consolidation shakes must be an integer >= 0, got {self.shakes!r}")
         for flag in ("fresh_baseline", "checked_moves"):
             if not isinstance(getattr(self, flag), bool):
                 raise InvalidInput(f"consolidation {flag} must be true or false")
@@ -148,34 +168,42 @@ class ConsolidationPolicy:
             "confidence": self.confidence,
             "block": self.block,
             "shift_ratio": self.shift_ratio,
-            # a policy of the behaviour before these three stores the bytes it had then
+            # a policy of the behaviour before these five stores the bytes it had then
+            **({"slowest": self.slowest} if self.slowest != self.longest else {}),
             **({} if self.refit is None else {"refit": self.refit}),
             **({"fresh_baseline": True} if self.fresh_baseline else {}),
             **({"checked_moves": True} if self.checked_moves else {}),
+            **({"shakes": self.shakes} if self.shakes else {}),
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> ConsolidationPolicy:
-        """A stored policy; one stored without ``refit``, ``fresh_baseline`` or
-        ``checked_moves`` keeps the behaviour it was stored with (no refit, the
-        reservoir's baseline, unchecked moves)."""
+        """A stored policy; one stored without ``refit``, ``fresh_baseline``,
+        ``checked_moves``, ``shakes`` or ``slowest`` keeps the behaviour it was stored
+        with (no refit, the reservoir's baseline, unchecked moves, no shakes, the epoch's
+        clock alone)."""
         if not isinstance(data, dict):
             raise InvalidInput("consolidation must be an object")
-        unknown = set(data) - {*cls().to_dict(), "refit", "fresh_baseline", "checked_moves"}
+        legacy = {"refit": None, "fresh_baseline": False, "checked_moves": False, "shakes": 0}
+        unknown = set(data) - {*cls().to_dict(), *legacy, "slowest"}
         if unknown:
             raise InvalidInput(f"unknown consolidation fields: {sorted(unknown)}")
-        return cls(**{"refit": None, "fresh_baseline": False, "checked_moves": False, **data})
+        slowest = data.get("longest", cls().longest)
+        return cls(**{**legacy, "slowest": slowest, **data})
 
-    def next_after(self, *, now: int, epoch: int) -> int:
-        """The target count of the next consolidation after one at ``now``."""
-        period = math.ceil((now - epoch) * (self.growth - 1.0))
-        return now + min(max(period, self.first), self.longest)
+    def next_after(self, *, now: int, epoch: int, accepted_at: int) -> int:
+        """The target count of the next consolidation after one at ``now``, in an epoch
+        that began at ``epoch``, references last replaced at ``accepted_at``."""
+        clock = math.ceil((now - epoch) * (self.growth - 1.0))
+        quiet = math.ceil((now - max(epoch, accepted_at)) * (self.growth - 1.0))
+        return now + max(min(max(clock, self.first), self.longest), min(quiet, self.slowest))
 
-    def apply_by(self, *, due: int, epoch: int) -> int:
+    def apply_by(self, *, due: int, epoch: int, accepted_at: int) -> int:
         """The target count by which a consolidation that fell due at ``due`` and is
         solved away from the fleet must be applied: half the period that would follow
         it, so that however fast targets come the schedule keeps its shape."""
-        return due + (self.next_after(now=due, epoch=epoch) - due) // 2
+        following = self.next_after(now=due, epoch=epoch, accepted_at=accepted_at)
+        return due + (following - due) // 2
 
 
 @dataclass(frozen=True, slots=True)
@@ -293,6 +321,7 @@ def consolidate(
     folds: int = 2,
     refit: bool = False,
     stands: StandSet[P] | None = None,
+    shakes: int = 0,
 ) -> Consolidation[P]:
     """Solve the reservoir without each fold, test on that fold, solve all if it pays.
 
@@ -328,6 +357,9 @@ def consolidate(
         (:func:`routing_svc.sa.stands.capacitated_sites`); the cost before is that of
         the vehicles' stands (:func:`routing_svc.sa.stands.stand_assignment`), and the
         references accepted are stands.
+    shakes : int
+        Shakes without gain of the accepted solve's neighbourhood search
+        (:attr:`ConsolidationPolicy.shakes`).
     """
     p = len(positions)
     if len(reservoir) < 2 or len(anchor) != p or len(updates) != p:
@@ -393,16 +425,14 @@ def consolidate(
             False, tuple(positions), tuple(updates), len(reservoir), before, before, gain,
             standard_error, fresh_before,
         )  # fmt: skip
+
+    def solved(_: int) -> IntArray:
+        return searched(costs, weight, best_fit(costs, weight, [current, anchored]), shakes)
+
     if stands is None:
-        ordered = _pair(current, best_fit(costs, weight, [current, anchored]))
+        ordered = _pair(current, solved(p))
     else:
-        slots = capacitated_sites(
-            costs,
-            weight,
-            stands.capacities,
-            p,
-            lambda _: best_fit(costs, weight, [current, anchored]),
-        )
+        slots = capacitated_sites(costs, weight, stands.capacities, p, solved)
         ordered = _pair(actual, slots)
     chosen_costs = costs[ordered]
     owner = chosen_costs.argmin(axis=0)
@@ -448,6 +478,7 @@ class ConsolidationJob(Generic[P]):
     folds: int
     refit: bool
     stands: StandSet[P] | None
+    shakes: int
 
     def solve(self) -> Consolidation[P]:
         """:func:`consolidate` on the copied inputs."""
@@ -464,6 +495,7 @@ class ConsolidationJob(Generic[P]):
             folds=self.folds,
             refit=self.refit,
             stands=self.stands,
+            shakes=self.shakes,
         )
 
 
@@ -545,6 +577,17 @@ def best_fit(costs: FloatArray, weight: FloatArray, starts: list[IntArray]) -> I
     candidates.append(fast_interchange(seen, seen_weight, greedy(seen, seen_weight, p)))
     values = [_total(costs, weight, c) for c in candidates]
     return candidates[int(np.argmin(values))]
+
+
+def searched(costs: FloatArray, weight: FloatArray, sites: IntArray, shakes: int) -> IntArray:
+    """``sites`` improved by variable neighbourhood search (``shakes`` without gain in
+    a row; 0: unchanged), over the targets of positive weight."""
+    if shakes == 0:
+        return sites
+    weighed = weight > 0.0
+    return neighbourhood_search(
+        np.compress(weighed, costs, axis=1), weight[weighed], sites, shakes_without_gain=shakes
+    )
 
 
 def _total(costs: FloatArray, weight: FloatArray, rows: IntArray) -> float:

@@ -688,7 +688,9 @@ class Fleet(Generic[P]):
             learning.accepted_at = state.targets
             learning.fitted = done.sample
         learning.baseline = done.fresh_baseline if policy.fresh_baseline else done.baseline
-        learning.next_consolidation = policy.next_after(now=state.targets, epoch=learning.epoch)
+        learning.next_consolidation = policy.next_after(
+            now=state.targets, epoch=learning.epoch, accepted_at=learning.accepted_at
+        )
         return done
 
     def due_consolidation(self) -> ConsolidationKey | None:
@@ -711,7 +713,11 @@ class Fleet(Generic[P]):
             return None
         return ConsolidationJob(
             key=key,
-            apply_by=policy.apply_by(due=learning.next_consolidation, epoch=learning.epoch),
+            apply_by=policy.apply_by(
+                due=learning.next_consolidation,
+                epoch=learning.epoch,
+                accepted_at=learning.accepted_at,
+            ),
             space=cast(SampleSpace[P], self.space),
             positions=tuple(state.positions),
             anchor=tuple(learning.anchor),
@@ -726,6 +732,7 @@ class Fleet(Generic[P]):
             and learning.fitted > 0
             and len(learning.reservoir) >= policy.refit * learning.fitted,
             stands=self.config.stands,
+            shakes=policy.shakes,
         )
 
     def replay_observe(

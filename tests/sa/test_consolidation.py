@@ -32,8 +32,9 @@ from routing_svc.sa import (
     Vehicle,
     learning_config,
 )
-from routing_svc.sa.consolidation import consolidate
+from routing_svc.sa.consolidation import consolidate, searched
 from routing_svc.sa.held_step import held_step
+from routing_svc.sa.interchange import fast_interchange
 from routing_svc.sa.requirements import build_requirement
 from routing_svc.types import FloatArray, IntArray, NetPosition
 
@@ -186,13 +187,19 @@ def no_swap_improves(costs: FloatArray, rows: Sequence[int], value: float) -> bo
 # -- the solver against brute force ---------------------------------------------------
 
 
+@pytest.mark.parametrize("shakes", [0, 20])
 @pytest.mark.parametrize(
     ("p", "power", "speed"),
     [(1, 1.0, 1.0), (1, 2.0, 1.0), (2, 1.0, 1.0), (3, 1.0, 1.0), (2, 2.0, 1.0), (2, 1.0, 2.5),
      (1, 2.0, 0.5)],
 )  # fmt: skip
 def test_consolidation_against_brute_force(
-    space: RoadSpace, monkeypatch: pytest.MonkeyPatch, p: int, power: float, speed: float
+    space: RoadSpace,
+    monkeypatch: pytest.MonkeyPatch,
+    p: int,
+    power: float,
+    speed: float,
+    shakes: int,
 ) -> None:
     _, targets = demand_stream(1, 10)
     reservoir = duplicated(targets)
@@ -201,7 +208,7 @@ def test_consolidation_against_brute_force(
     fits = spy_on_fits(monkeypatch)
     done = consolidate(
         space, start, start, reservoir, power=power, speed=speed, confidence=0.0,
-        updates=[7] * p, fresh=m,
+        updates=[7] * p, fresh=m, shakes=shakes,
     )  # fmt: skip
     assert done.accepted is True
     assert done.sample == m
@@ -214,7 +221,7 @@ def test_consolidation_against_brute_force(
     before = sample_objective(space, start, reservoir, power, speed)
     assert value < before
     assert value >= optimum * (1 - 1e-12)
-    if p == 1:
+    if p == 1 or shakes > 0:  # the neighbourhood search finds these small optima
         assert value == pytest.approx(optimum, rel=1e-9)
     # whatever p, no swap of one reference for another candidate does better
     assert no_swap_improves(costs, [sites.index(x) for x in done.positions], value)
@@ -234,6 +241,24 @@ def test_consolidation_against_brute_force(
     assert done.standard_error == pytest.approx(standard_error, rel=1e-9, abs=1e-12 * before)
     assert done.gain < 0.0
     assert done.baseline == done.sample_before + done.gain
+
+
+def test_the_accepted_solve_searches_beyond_single_swaps() -> None:
+    # points in the unit square: 9 sites, 30 targets of weight 0 to 2, 3 medians
+    stuck = 0
+    for seed in range(300):
+        rng = np.random.default_rng(seed)
+        sites, targets = rng.uniform(0.0, 1.0, (9, 2)), rng.uniform(0.0, 1.0, (30, 2))
+        costs = np.linalg.norm(sites[:, None] - targets[None], axis=2)
+        weight = rng.integers(0, 3, 30).astype(np.float64)
+        optimum, _ = brute_force(costs * weight, 3)
+        local = fast_interchange(costs, weight, np.arange(3))
+        stuck += float(weight @ costs[local].min(axis=0)) > optimum * (1 + 1e-12)
+        assert np.array_equal(searched(costs, weight, local, 0), local)
+        found = searched(costs, weight, local, 20)
+        assert len(set(found.tolist())) == 3
+        assert float(weight @ costs[found].min(axis=0)) == pytest.approx(optimum, rel=1e-12)
+    assert stuck > 0  # single swaps alone stop short of the optimum on some of them
 
 
 def test_the_references_are_paired_to_the_vehicles_that_stand_on_them(space: RoadSpace) -> None:
@@ -606,6 +631,9 @@ def test_consolidate_rejects_mismatched_inputs(space: RoadSpace) -> None:
         {"confidence": math.nan},
         {"shift_ratio": 1.0},
         {"shift_ratio": math.inf},
+        {"slowest": 3999},  # shorter than longest
+        {"slowest": 40_000.0},
+        {"shakes": -1},
     ],
 )
 def test_policy_validation(bad: dict[str, Any]) -> None:
@@ -629,22 +657,30 @@ def test_policy_round_trip() -> None:
             refit=3.0,
             fresh_baseline=False,
             checked_moves=False,
+            shakes=5,
+            slowest=300,
         ),
+        ConsolidationPolicy(slowest=50_000),
         ConsolidationPolicy(refit=None),
+        ConsolidationPolicy(shakes=0),
     ):
         data = json.loads(json.dumps(policy.to_dict()))
         assert ConsolidationPolicy.from_dict(data) == policy
-    # a policy stored before refit, the fresh baseline and checked moves keeps the
-    # behaviour it had
+    # a policy stored before refit, the fresh baseline, checked moves and shakes keeps
+    # the behaviour it had
     assert ConsolidationPolicy.from_dict({}) == ConsolidationPolicy(
-        refit=None, fresh_baseline=False, checked_moves=False
+        refit=None, fresh_baseline=False, checked_moves=False, shakes=0, slowest=4000
     )
+    assert ConsolidationPolicy.from_dict({"longest": 300}).slowest == 300
     wrongs: list[dict[str, Any]] = [
         {"refit": 1.0},
         {"refit": True},
         {"refit": "2"},
         {"fresh_baseline": 1},
         {"checked_moves": "yes"},
+        {"shakes": 2.0},
+        {"shakes": True},
+        {"slowest": "32000"},
     ]
     for wrong in wrongs:
         with pytest.raises(InvalidInput):
@@ -656,18 +692,55 @@ def test_policy_round_trip() -> None:
 
 
 def test_next_after_by_hand() -> None:
-    policy = ConsolidationPolicy(first=250, growth=1.5, longest=8000)
+    policy = ConsolidationPolicy(first=250, growth=1.5, longest=8000, slowest=8000)
+
+    def after(now: int, epoch: int = 0) -> int:
+        return policy.next_after(now=now, epoch=epoch, accepted_at=now)
+
     # the period is 0.5 x the targets of the epoch so far, at least 250, at most 8000
-    assert policy.next_after(now=250, epoch=0) == 500  # 125 -> 250
-    assert policy.next_after(now=500, epoch=0) == 750  # 250
-    assert policy.next_after(now=750, epoch=0) == 1125  # 375
-    assert policy.next_after(now=1125, epoch=0) == 1688  # 562.5 -> 563
-    assert policy.next_after(now=1688, epoch=0) == 2532  # 844
-    assert policy.next_after(now=20_000, epoch=0) == 28_000  # 10,000 -> 8,000
-    assert policy.next_after(now=2250, epoch=2000) == 2500  # in a new epoch: 125 -> 250
-    assert policy.next_after(now=3001, epoch=2000) == 3502  # 500.5 -> 501
-    short = ConsolidationPolicy(first=250, growth=1.5, longest=400)
-    assert short.next_after(now=1125, epoch=0) == 1525
+    assert after(250) == 500  # 125 -> 250
+    assert after(500) == 750  # 250
+    assert after(750) == 1125  # 375
+    assert after(1125) == 1688  # 562.5 -> 563
+    assert after(1688) == 2532  # 844
+    assert after(20_000) == 28_000  # 10,000 -> 8,000
+    assert after(2250, epoch=2000) == 2500  # in a new epoch: 125 -> 250
+    assert after(3001, epoch=2000) == 3502  # 500.5 -> 501
+    short = ConsolidationPolicy(first=250, growth=1.5, longest=400, slowest=400)
+    assert short.next_after(now=1125, epoch=0, accepted_at=0) == 1525
+
+
+def test_turned_down_consolidations_come_ever_more_rarely() -> None:
+    policy = ConsolidationPolicy(first=250, growth=1.25, longest=4000, slowest=32_000)
+
+    def after(now: int, accepted_at: int, epoch: int = 0) -> int:
+        return policy.next_after(now=now, epoch=epoch, accepted_at=accepted_at)
+
+    # just taken: the epoch's clock, a quarter of its targets capped at 4,000
+    assert after(1000, accepted_at=1000) == 1250  # 250
+    assert after(40_000, accepted_at=40_000) == 44_000  # 10,000 -> 4,000
+    # turned down since 10,000: a quarter of the 30,000 targets since then
+    assert after(40_000, accepted_at=10_000) == 47_500
+    assert after(40_000, accepted_at=30_000) == 44_000  # 2,500 < 4,000
+    assert after(500_000, accepted_at=0) == 532_000  # 125,000 -> 32,000
+    # the quiet clock starts again with a new epoch
+    assert after(40_000, accepted_at=0, epoch=39_000) == 40_250  # 250, 250
+    # turned down from the start: the two clocks agree until the epoch's reaches 4,000
+    due, dues = 250, []
+    while due < 100_000:
+        dues.append(due)
+        due = after(due, accepted_at=0)
+    assert dues[:12] == [250, 500, 750, 1000, 1250, 1563, 1954, 2443, 3054, 3818, 4773, 5967]
+    periods = np.diff(dues)
+    assert np.all(periods[1:] >= periods[:-1])
+    assert periods.max() == 17_370  # at 69,478: ceil(0.25 * 69,478)
+    # a policy stored before the quiet clock keeps the epoch's alone
+    stored = {k: v for k, v in policy.to_dict().items() if k != "slowest"}
+    assert ConsolidationPolicy.from_dict(stored).slowest == 4000
+    assert (
+        ConsolidationPolicy.from_dict(stored).next_after(now=500_000, epoch=0, accepted_at=0)
+        == 504_000
+    )
 
 
 # -- a fleet that consolidates -------------------------------------------------------
@@ -712,12 +785,13 @@ def test_policy_defaults() -> None:
     # the values docs/learning.md states
     assert (policy.reservoir, policy.first, policy.longest, policy.block) == (4000, 250, 4000, 250)
     assert (policy.growth, policy.folds, policy.confidence, policy.shift_ratio) == (
-        1.5,
+        1.25,
         4,
         0.0,
         1.25,
     )
     assert (policy.refit, policy.fresh_baseline, policy.checked_moves) == (1.5, True, True)
+    assert (policy.shakes, policy.slowest) == (20, 32_000)
 
 
 Run = tuple[list[NetPosition], Fleet[NetPosition], list[Any]]
@@ -735,15 +809,41 @@ def test_consolidations_happen_on_the_schedule(calm_run: Run) -> None:
     _, fleet, outcomes = calm_run
     assert fleet.config.rule is Rule.CONSOLIDATING
     done = [o.index + 1 for o in outcomes if o.consolidation is not None]
-    assert done == [250, 500, 750, 1125, 1688, 2532]
+    # periods of a quarter of the epoch's targets, at least 250: 188 -> 250, 313, 391, 489
+    assert done == [250, 500, 750, 1000, 1250, 1563, 1954, 2443]
     assert done == schedule(CALM, start=CALM.first, epoch=0, until=3000)
     assert any(o.consolidation.accepted for o in outcomes if o.consolidation is not None)
     learning = fleet.state.learning
     assert learning is not None and learning.epoch == 0
-    assert learning.next_consolidation == 3798
+    assert learning.next_consolidation == 3054  # 2443 + 611
     assert len(learning.reservoir) == 3000
     last = max(o.index + 1 for o in outcomes if o.consolidation and o.consolidation.accepted)
     assert learning.accepted_at == last
+
+
+def test_a_fleet_whose_consolidations_are_turned_down_consolidates_more_rarely(
+    space: RoadSpace,
+) -> None:
+    policy = ConsolidationPolicy(
+        reservoir=400, first=50, longest=100, slowest=800, block=50, shift_ratio=1e9
+    )
+    _, stream = demand_stream(3, 6000)
+    fleet = consolidating_fleet(space, policy=policy)
+    outcomes = [fleet.observe(z) for z in stream]
+    taken = {o.index + 1: o.consolidation.accepted for o in outcomes if o.consolidation}
+    # by hand: the longer of a quarter of the epoch's targets (50 to 100) and a quarter of
+    # the targets since the references were last replaced (up to 800)
+    expected, due, accepted_at = [], 50, 0
+    while due <= len(stream):
+        expected.append(due)
+        accepted_at = due if taken.get(due) else accepted_at
+        clock = min(max(math.ceil(due * 0.25), 50), 100)
+        quiet = min(math.ceil((due - accepted_at) * 0.25), 800)
+        due += max(clock, quiet)
+    assert sorted(taken) == expected
+    periods = np.diff(expected)
+    assert periods.max() > 100  # the quiet clock acted
+    assert not all(taken.values()) and any(taken.values())
 
 
 def test_each_consolidation_tests_the_targets_since_the_last_acceptance(
@@ -1260,7 +1360,9 @@ def test_a_deferred_fleet_applies_a_consolidation_solved_away_from_it_later(
         assert deferred.state.positions == list(done.positions)
         assert learning.accepted_at == k + 3 + lag
     # the schedule runs on from where it was applied
-    assert learning.next_consolidation == CALM.next_after(now=k + 3 + lag, epoch=0)
+    assert learning.next_consolidation == CALM.next_after(
+        now=k + 3 + lag, epoch=0, accepted_at=learning.accepted_at
+    )
     # replay applies it where it was recorded, without solving, bit for bit
     replayed = consolidating_fleet(space, policy=CALM)
     for z, r in zip(stream[: k + 3 + lag], recorded, strict=True):
