@@ -23,7 +23,8 @@ each fold in turn; every *fresh* target (one that came after the current
 references were accepted, so that they were not fitted to it) is then priced from
 the configuration solved without its fold, a cross-validated estimate of what
 solving again gains over the current references. Only if the
-gain exceeds ``confidence`` standard errors of the paired differences is the
+gain exceeds ``confidence`` standard errors of the paired differences
+(``settled_confidence`` once the epoch's clock has reached ``longest``) is the
 problem solved on the whole reservoir, from the current and the last accepted
 references and from scratch, and the best replaces the references; each
 vehicle's step counter restarts at the number of reservoir targets it now
@@ -89,6 +90,11 @@ class ConsolidationPolicy:
         Folds of the cross-validated test.
     confidence : float
         Standard errors by which the cross-validated gain must exceed zero.
+    settled_confidence : float
+        The same, once the epoch's clock has reached ``longest`` (a demand that has
+        stayed for ``longest / (growth - 1)`` targets), where a fit of the reservoir
+        is as good an estimate as it will get and a gain within the noise is no reason
+        to move.
     block : int
         Targets per block of the shift test.
     shift_ratio : float
@@ -121,6 +127,7 @@ class ConsolidationPolicy:
     slowest: int = 32000
     folds: int = 4
     confidence: float = 0.0
+    settled_confidence: float = 1.0
     block: int = 250
     shift_ratio: float = 1.25
     refit: float | None = 1.5
@@ -141,8 +148,12 @@ class ConsolidationPolicy:
             raise InvalidInput("the consolidation block must fit in the reservoir")
         if not (math.isfinite(self.growth) and self.growth > 1.0):
             raise InvalidInput("consolidation growth must be a finite number > 1")
-        if not (math.isfinite(self.confidence) and self.confidence >= 0.0):
-            raise InvalidInput("consolidation confidence must be a finite number >= 0")
+        for name in ("confidence", "settled_confidence"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, float | int):
+                raise InvalidInput(f"consolidation {name} must be a number, got {value!r}")
+            if not (math.isfinite(value) and value >= 0.0):
+                raise InvalidInput(f"consolidation {name} must be a finite number >= 0")
         if not (math.isfinite(self.shift_ratio) and self.shift_ratio > 1.0):
             raise InvalidInput("consolidation shift_ratio must be a finite number > 1")
         if self.refit is not None and not (
@@ -168,8 +179,13 @@ class ConsolidationPolicy:
             "confidence": self.confidence,
             "block": self.block,
             "shift_ratio": self.shift_ratio,
-            # a policy of the behaviour before these five stores the bytes it had then
+            # a policy of the behaviour before these six stores the bytes it had then
             **({"slowest": self.slowest} if self.slowest != self.longest else {}),
+            **(
+                {"settled_confidence": self.settled_confidence}
+                if self.settled_confidence != self.confidence
+                else {}
+            ),
             **({} if self.refit is None else {"refit": self.refit}),
             **({"fresh_baseline": True} if self.fresh_baseline else {}),
             **({"checked_moves": True} if self.checked_moves else {}),
@@ -179,17 +195,21 @@ class ConsolidationPolicy:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> ConsolidationPolicy:
         """A stored policy; one stored without ``refit``, ``fresh_baseline``,
-        ``checked_moves``, ``shakes`` or ``slowest`` keeps the behaviour it was stored
-        with (no refit, the reservoir's baseline, unchecked moves, no shakes, the epoch's
-        clock alone)."""
+        ``checked_moves``, ``shakes``, ``slowest`` or ``settled_confidence`` keeps the
+        behaviour it was stored with (no refit, the reservoir's baseline, unchecked moves,
+        no shakes, the epoch's clock alone, one confidence throughout)."""
         if not isinstance(data, dict):
             raise InvalidInput("consolidation must be an object")
         legacy = {"refit": None, "fresh_baseline": False, "checked_moves": False, "shakes": 0}
-        unknown = set(data) - {*cls().to_dict(), *legacy, "slowest"}
+        unknown = set(data) - {*cls().to_dict(), *legacy, "slowest", "settled_confidence"}
         if unknown:
             raise InvalidInput(f"unknown consolidation fields: {sorted(unknown)}")
-        slowest = data.get("longest", cls().longest)
-        return cls(**{**legacy, "slowest": slowest, **data})
+        default = cls()
+        same = {
+            "slowest": data.get("longest", default.longest),
+            "settled_confidence": data.get("confidence", default.confidence),
+        }
+        return cls(**{**legacy, **same, **data})
 
     def next_after(self, *, now: int, epoch: int, accepted_at: int) -> int:
         """The target count of the next consolidation after one at ``now``, in an epoch
@@ -197,6 +217,13 @@ class ConsolidationPolicy:
         clock = math.ceil((now - epoch) * (self.growth - 1.0))
         quiet = math.ceil((now - max(epoch, accepted_at)) * (self.growth - 1.0))
         return now + max(min(max(clock, self.first), self.longest), min(quiet, self.slowest))
+
+    def confidence_at(self, *, due: int, epoch: int) -> float:
+        """The confidence of the consolidation due at ``due`` in an epoch that began at
+        ``epoch``: :attr:`settled_confidence` once the epoch's clock has reached
+        :attr:`longest`, else :attr:`confidence`."""
+        settled = math.ceil((due - epoch) * (self.growth - 1.0)) >= self.longest
+        return self.settled_confidence if settled else self.confidence
 
     def apply_by(self, *, due: int, epoch: int, accepted_at: int) -> int:
         """The target count by which a consolidation that fell due at ``due`` and is

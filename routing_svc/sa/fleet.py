@@ -724,7 +724,7 @@ class Fleet(Generic[P]):
             reservoir=tuple(learning.reservoir),
             power=self.config.objective.power,
             speed=float(self._speeds[0]),
-            confidence=policy.confidence,
+            confidence=policy.confidence_at(due=learning.next_consolidation, epoch=learning.epoch),
             updates=tuple(state.updates),
             fresh=state.targets - learning.accepted_at,
             folds=policy.folds,

@@ -632,6 +632,9 @@ def test_consolidate_rejects_mismatched_inputs(space: RoadSpace) -> None:
         {"shift_ratio": 1.0},
         {"shift_ratio": math.inf},
         {"slowest": 3999},  # shorter than longest
+        {"settled_confidence": -1.0},
+        {"settled_confidence": math.nan},
+        {"settled_confidence": True},
         {"slowest": 40_000.0},
         {"shakes": -1},
     ],
@@ -661,6 +664,8 @@ def test_policy_round_trip() -> None:
             slowest=300,
         ),
         ConsolidationPolicy(slowest=50_000),
+        ConsolidationPolicy(confidence=0.5, settled_confidence=0.5),
+        ConsolidationPolicy(settled_confidence=0.0),
         ConsolidationPolicy(refit=None),
         ConsolidationPolicy(shakes=0),
     ):
@@ -669,8 +674,14 @@ def test_policy_round_trip() -> None:
     # a policy stored before refit, the fresh baseline, checked moves and shakes keeps
     # the behaviour it had
     assert ConsolidationPolicy.from_dict({}) == ConsolidationPolicy(
-        refit=None, fresh_baseline=False, checked_moves=False, shakes=0, slowest=4000
+        refit=None,
+        fresh_baseline=False,
+        checked_moves=False,
+        shakes=0,
+        slowest=4000,
+        settled_confidence=0.0,
     )
+    assert ConsolidationPolicy.from_dict({"confidence": 0.5}).settled_confidence == 0.5
     assert ConsolidationPolicy.from_dict({"longest": 300}).slowest == 300
     wrongs: list[dict[str, Any]] = [
         {"refit": 1.0},
@@ -791,7 +802,7 @@ def test_policy_defaults() -> None:
         1.25,
     )
     assert (policy.refit, policy.fresh_baseline, policy.checked_moves) == (1.5, True, True)
-    assert (policy.shakes, policy.slowest) == (20, 32_000)
+    assert (policy.shakes, policy.slowest, policy.settled_confidence) == (20, 32_000, 1.0)
 
 
 Run = tuple[list[NetPosition], Fleet[NetPosition], list[Any]]
@@ -844,6 +855,33 @@ def test_a_fleet_whose_consolidations_are_turned_down_consolidates_more_rarely(
     periods = np.diff(expected)
     assert periods.max() > 100  # the quiet clock acted
     assert not all(taken.values()) and any(taken.values())
+
+
+def test_a_settled_demand_asks_more_of_a_consolidation(
+    space: RoadSpace, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    policy = ConsolidationPolicy(
+        reservoir=400, first=50, longest=100, block=50, shift_ratio=1e9, settled_confidence=2.0
+    )
+    # by hand: the epoch's clock is a quarter of its targets, settled from 400 targets on
+    assert policy.confidence_at(due=396, epoch=0) == 0.0  # 99
+    assert policy.confidence_at(due=400, epoch=0) == 2.0  # 100
+    assert policy.confidence_at(due=1000, epoch=700) == 0.0  # a new epoch: 75
+    asked: list[tuple[int, float]] = []
+
+    def recording(
+        space_: Any, positions: Any, anchor: Any, reservoir: Any, **kw: Any
+    ) -> Consolidation[NetPosition]:
+        asked.append((fleet.state.targets, kw["confidence"]))
+        return consolidate(space_, positions, anchor, reservoir, **kw)
+
+    monkeypatch.setattr("routing_svc.sa.consolidation.consolidate", recording)
+    fleet = consolidating_fleet(space, policy=policy)
+    _, stream = demand_stream(5, 1500)
+    for z in stream:
+        fleet.observe(z)
+    assert [c for _, c in asked] == [0.0 if math.ceil(k * 0.25) < 100 else 2.0 for k, _ in asked]
+    assert {c for _, c in asked} == {0.0, 2.0}
 
 
 def test_each_consolidation_tests_the_targets_since_the_last_acceptance(
