@@ -211,18 +211,22 @@ class ConsolidationPolicy:
         }
         return cls(**{**legacy, **same, **data})
 
+    def _growth_of(self, targets: int) -> int:
+        """``growth - 1`` times ``targets``, rounded up: a clock's uncapped period."""
+        return math.ceil(targets * (self.growth - 1.0))
+
     def next_after(self, *, now: int, epoch: int, accepted_at: int) -> int:
         """The target count of the next consolidation after one at ``now``, in an epoch
         that began at ``epoch``, references last replaced at ``accepted_at``."""
-        clock = math.ceil((now - epoch) * (self.growth - 1.0))
-        quiet = math.ceil((now - max(epoch, accepted_at)) * (self.growth - 1.0))
-        return now + max(min(max(clock, self.first), self.longest), min(quiet, self.slowest))
+        clock = min(max(self._growth_of(now - epoch), self.first), self.longest)
+        quiet = min(self._growth_of(now - max(epoch, accepted_at)), self.slowest)
+        return now + max(clock, quiet)
 
     def confidence_at(self, *, due: int, epoch: int) -> float:
         """The confidence of the consolidation due at ``due`` in an epoch that began at
         ``epoch``: :attr:`settled_confidence` once the epoch's clock has reached
         :attr:`longest`, else :attr:`confidence`."""
-        settled = math.ceil((due - epoch) * (self.growth - 1.0)) >= self.longest
+        settled = self._growth_of(due - epoch) >= self.longest
         return self.settled_confidence if settled else self.confidence
 
     def apply_by(self, *, due: int, epoch: int, accepted_at: int) -> int:
@@ -596,10 +600,7 @@ def best_fit(costs: FloatArray, weight: FloatArray, starts: list[IntArray]) -> I
     distinct = [
         s for k, s in enumerate(starts) if not any(np.array_equal(s, t) for t in starts[:k])
     ]
-    weighed = weight > 0.0
-    seen, seen_weight = costs, weight
-    if not weighed.all():
-        seen, seen_weight = np.compress(weighed, costs, axis=1), weight[weighed]
+    seen, seen_weight = _weighed(costs, weight)
     candidates = [fast_interchange(seen, seen_weight, s) for s in distinct]
     candidates.append(fast_interchange(seen, seen_weight, greedy(seen, seen_weight, p)))
     values = [_total(costs, weight, c) for c in candidates]
@@ -611,10 +612,17 @@ def searched(costs: FloatArray, weight: FloatArray, sites: IntArray, shakes: int
     a row; 0: unchanged), over the targets of positive weight."""
     if shakes == 0:
         return sites
+    seen, seen_weight = _weighed(costs, weight)
+    return neighbourhood_search(seen, seen_weight, sites, shakes_without_gain=shakes)
+
+
+def _weighed(costs: FloatArray, weight: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The columns of positive weight (the others add exact zeros to every sum); the
+    arrays themselves, not a copy, when every weight is positive."""
     weighed = weight > 0.0
-    return neighbourhood_search(
-        np.compress(weighed, costs, axis=1), weight[weighed], sites, shakes_without_gain=shakes
-    )
+    if weighed.all():
+        return costs, weight
+    return np.compress(weighed, costs, axis=1), weight[weighed]
 
 
 def _total(costs: FloatArray, weight: FloatArray, rows: IntArray) -> float:
