@@ -38,9 +38,10 @@ last replaced have grown by that factor, that period capped at ``slowest``, so t
 fleet whose consolidations keep being turned down (it has learnt a demand that
 stays) consolidates ever more rarely. The mean cost of
 each block of targets is compared with the mean cost expected of the references
-at the last consolidation; a block that costs ``shift_ratio`` times more starts a
-new epoch (the demand moved): the reservoir keeps that block only and the
-schedule starts again.
+at the last consolidation; a block that costs ``shift_ratio`` times more, by more
+than ``shift_confidence`` standard errors of its mean (so that the heavy tail of a
+concentrated demand's costs is not taken for a move), starts a new epoch (the demand
+moved): the reservoir keeps that block only and the schedule starts again.
 
 Each consolidation is recorded with the target that triggered it
 (:class:`Consolidation`), so that replay applies it without solving again.
@@ -99,7 +100,10 @@ class ConsolidationPolicy:
         Targets per block of the shift test.
     shift_ratio : float
         A block whose mean cost exceeds this times the baseline of the last
-        consolidation starts a new epoch.
+        consolidation starts a new epoch (see :meth:`starts_epoch`).
+    shift_confidence : float
+        Standard errors of the block's mean (from the block's own spread) by which it
+        must exceed ``shift_ratio`` times the baseline; 0: the ratio alone decides.
     refit : float or None
         References that a consolidation fitted to ``m`` targets of the epoch give way to
         the fit of a reservoir of at least ``refit * m`` targets unless the
@@ -130,6 +134,7 @@ class ConsolidationPolicy:
     settled_confidence: float = 1.0
     block: int = 250
     shift_ratio: float = 1.25
+    shift_confidence: float = 3.0
     refit: float | None = 1.5
     fresh_baseline: bool = True
     checked_moves: bool = True
@@ -148,7 +153,7 @@ class ConsolidationPolicy:
             raise InvalidInput("the consolidation block must fit in the reservoir")
         if not (math.isfinite(self.growth) and self.growth > 1.0):
             raise InvalidInput("consolidation growth must be a finite number > 1")
-        for name in ("confidence", "settled_confidence"):
+        for name in ("confidence", "settled_confidence", "shift_confidence"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, float | int):
                 raise InvalidInput(f"consolidation {name} must be a number, got {value!r}")
@@ -190,17 +195,25 @@ class ConsolidationPolicy:
             **({"fresh_baseline": True} if self.fresh_baseline else {}),
             **({"checked_moves": True} if self.checked_moves else {}),
             **({"shakes": self.shakes} if self.shakes else {}),
+            **({"shift_confidence": self.shift_confidence} if self.shift_confidence else {}),
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> ConsolidationPolicy:
         """A stored policy; one stored without ``refit``, ``fresh_baseline``,
-        ``checked_moves``, ``shakes``, ``slowest`` or ``settled_confidence`` keeps the
-        behaviour it was stored with (no refit, the reservoir's baseline, unchecked moves,
-        no shakes, the epoch's clock alone, one confidence throughout)."""
+        ``checked_moves``, ``shakes``, ``slowest``, ``settled_confidence`` or
+        ``shift_confidence`` keeps the behaviour it was stored with (no refit, the
+        reservoir's baseline, unchecked moves, no shakes, the epoch's clock alone, one
+        confidence throughout, the shift test's ratio alone)."""
         if not isinstance(data, dict):
             raise InvalidInput("consolidation must be an object")
-        legacy = {"refit": None, "fresh_baseline": False, "checked_moves": False, "shakes": 0}
+        legacy = {
+            "refit": None,
+            "fresh_baseline": False,
+            "checked_moves": False,
+            "shakes": 0,
+            "shift_confidence": 0.0,
+        }
         unknown = set(data) - {*cls().to_dict(), *legacy, "slowest", "settled_confidence"}
         if unknown:
             raise InvalidInput(f"unknown consolidation fields: {sorted(unknown)}")
@@ -228,6 +241,21 @@ class ConsolidationPolicy:
         :attr:`longest`, else :attr:`confidence`."""
         settled = self._growth_of(due - epoch) >= self.longest
         return self.settled_confidence if settled else self.confidence
+
+    def starts_epoch(
+        self, *, cost_sum: float, square_sum: float, size: int, baseline: float | None
+    ) -> bool:
+        """Whether a block of ``size`` targets whose costs sum to ``cost_sum`` (their
+        squares to ``square_sum``) shows that the demand moved: its mean exceeds
+        :attr:`shift_ratio` times ``baseline`` by more than :attr:`shift_confidence`
+        standard errors of that mean. No baseline (no consolidation yet in the epoch): no.
+        """
+        if baseline is None or size < 2:
+            return False
+        mean = cost_sum / size
+        spread = max(square_sum - size * mean * mean, 0.0) / (size - 1)
+        excess = mean - self.shift_ratio * baseline
+        return excess > 0.0 and excess > self.shift_confidence * math.sqrt(spread / size)
 
     def apply_by(self, *, due: int, epoch: int, accepted_at: int) -> int:
         """The target count by which a consolidation that fell due at ``due`` and is

@@ -252,6 +252,8 @@ class Learning(Generic[P]):
     this epoch (0: they were not)."""
     block_cost: float = 0.0
     block_size: int = 0
+    block_squares: float = 0.0
+    """Sum of the squared costs of the current block (the shift test's spread)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -649,11 +651,15 @@ class Fleet(Generic[P]):
         state = self.state
         learning.reservoir.append(target)
         learning.block_cost += cost
+        learning.block_squares += cost * cost
         learning.block_size += 1
         if learning.block_size >= policy.block:
-            mean = learning.block_cost / learning.block_size
-            baseline = learning.baseline
-            if baseline is not None and mean > policy.shift_ratio * baseline:
+            if policy.starts_epoch(
+                cost_sum=learning.block_cost,
+                square_sum=learning.block_squares,
+                size=learning.block_size,
+                baseline=learning.baseline,
+            ):
                 recent = list(learning.reservoir)[-policy.block :]
                 learning.reservoir.clear()
                 learning.reservoir.extend(recent)
@@ -661,7 +667,7 @@ class Fleet(Generic[P]):
                 learning.next_consolidation = state.targets + policy.first
                 learning.baseline = None
                 learning.fitted = 0
-            learning.block_cost, learning.block_size = 0.0, 0
+            learning.block_cost, learning.block_squares, learning.block_size = 0.0, 0.0, 0
         if state.targets < learning.next_consolidation:
             if recorded is not None:
                 raise ReplayMismatch("a consolidation was recorded where none was due")
@@ -935,6 +941,7 @@ class Fleet(Generic[P]):
             "block_cost": learning.block_cost,
             "block_size": learning.block_size,
             **({} if policy.refit is None else {"fitted": learning.fitted}),
+            **({"block_squares": learning.block_squares} if policy.shift_confidence else {}),
         }
 
     def _learning_from(self, data: dict[str, Any]) -> Learning[P]:
@@ -961,6 +968,7 @@ class Fleet(Generic[P]):
             accepted_at=int(data["accepted_at"]),
             block_cost=float(data["block_cost"]),
             block_size=int(data["block_size"]),
+            block_squares=float(data.get("block_squares", 0.0)),
             fitted=int(data.get("fitted", 0)),
         )
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import statistics
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -637,6 +638,8 @@ def test_consolidate_rejects_mismatched_inputs(space: RoadSpace) -> None:
         {"settled_confidence": True},
         {"slowest": 40_000.0},
         {"shakes": -1},
+        {"shift_confidence": -0.5},
+        {"shift_confidence": math.inf},
     ],
 )
 def test_policy_validation(bad: dict[str, Any]) -> None:
@@ -668,6 +671,8 @@ def test_policy_round_trip() -> None:
         ConsolidationPolicy(settled_confidence=0.0),
         ConsolidationPolicy(refit=None),
         ConsolidationPolicy(shakes=0),
+        ConsolidationPolicy(shift_confidence=0.0),
+        ConsolidationPolicy(shift_confidence=1.5),
     ):
         data = json.loads(json.dumps(policy.to_dict()))
         assert ConsolidationPolicy.from_dict(data) == policy
@@ -680,6 +685,7 @@ def test_policy_round_trip() -> None:
         shakes=0,
         slowest=4000,
         settled_confidence=0.0,
+        shift_confidence=0.0,
     )
     assert ConsolidationPolicy.from_dict({"confidence": 0.5}).settled_confidence == 0.5
     assert ConsolidationPolicy.from_dict({"longest": 300}).slowest == 300
@@ -692,6 +698,8 @@ def test_policy_round_trip() -> None:
         {"shakes": 2.0},
         {"shakes": True},
         {"slowest": "32000"},
+        {"shift_confidence": -1.0},
+        {"shift_confidence": "3"},
     ]
     for wrong in wrongs:
         with pytest.raises(InvalidInput):
@@ -803,6 +811,7 @@ def test_policy_defaults() -> None:
     )
     assert (policy.refit, policy.fresh_baseline, policy.checked_moves) == (1.5, True, True)
     assert (policy.shakes, policy.slowest, policy.settled_confidence) == (20, 32_000, 1.0)
+    assert policy.shift_confidence == 3.0
 
 
 Run = tuple[list[NetPosition], Fleet[NetPosition], list[Any]]
@@ -1030,13 +1039,54 @@ def block_means(outcomes: Sequence[Any], block: int) -> list[tuple[int, float]]:
 
 def first_shift(outcomes: Sequence[Any], policy: ConsolidationPolicy) -> int | None:
     """The first block end whose mean cost exceeds ``shift_ratio`` times the baseline of the
-    last consolidation before it, from the outcomes alone."""
-    baselines = {o.index + 1: o.consolidation.baseline for o in outcomes if o.consolidation}
+    last consolidation before it by more than ``shift_confidence`` standard errors of the
+    block's mean, from the outcomes alone."""
+    baselines = {
+        o.index + 1: (
+            o.consolidation.fresh_baseline if policy.fresh_baseline else o.consolidation.baseline
+        )
+        for o in outcomes
+        if o.consolidation
+    }
+    costs = [o.dispatch.objective for o in outcomes]
     for end, mean in block_means(outcomes, policy.block):
         earlier = [count for count in baselines if count < end]
-        if earlier and mean > policy.shift_ratio * baselines[max(earlier)]:
+        if not earlier:
+            continue
+        excess = mean - policy.shift_ratio * baselines[max(earlier)]
+        error = statistics.stdev(costs[end - policy.block : end]) / math.sqrt(policy.block)
+        if excess > 0.0 and excess > policy.shift_confidence * error:
             return end
     return None
+
+
+def test_the_shift_test_by_hand() -> None:
+    policy = ConsolidationPolicy()  # ratio 1.25, three standard errors
+    assert (policy.shift_ratio, policy.shift_confidence) == (1.25, 3.0)
+
+    def fires(costs: list[float], baseline: float | None, rule: ConsolidationPolicy) -> bool:
+        return rule.starts_epoch(
+            cost_sum=math.fsum(costs),
+            square_sum=math.fsum(c * c for c in costs),
+            size=len(costs),
+            baseline=baseline,
+        )
+
+    # one far target in a block of 250: the mean is 13.96, above 12.5, but its standard
+    # error (62.6 / sqrt(250) = 3.96) is larger than the excess (1.46)
+    outlier = [10.0] * 249 + [1000.0]
+    assert math.fsum(outlier) / 250 > 1.25 * 10.0
+    assert not fires(outlier, 10.0, policy)
+    assert fires(outlier, 10.0, ConsolidationPolicy(shift_confidence=0.0))  # the ratio alone
+    # a block that costs twice the baseline throughout: an excess of 7.5, error 0
+    assert fires([20.0] * 250, 10.0, policy)
+    # the same mean with a spread of 5 (error 0.32): fires; made of 225 zeros and 25 far
+    # targets of 200 (spread 60.1, error 3.80, three of them 11.4 > 7.5): does not
+    assert fires([15.0, 25.0] * 125, 10.0, policy)
+    assert not fires([0.0] * 225 + [200.0] * 25, 10.0, policy)
+    # at the ratio, or without a baseline: never
+    assert not fires([12.5] * 250, 10.0, policy)
+    assert not fires([100.0] * 250, None, policy)
 
 
 def test_identical_vehicles_consolidate_on_the_schedule_whatever_their_common_speed(
@@ -1104,6 +1154,34 @@ def test_a_shift_of_the_demand_starts_a_new_epoch(space: RoadSpace) -> None:
     before = expected_cost(space, at_shift, speeds, east)
     after = expected_cost(space, fleet.state.positions, speeds, east)
     assert after < 0.8 * before
+
+
+def test_far_targets_in_a_block_of_a_demand_that_stays_start_no_epoch(space: RoadSpace) -> None:
+    # 20 of the 250 targets of one block at the place farthest from the fleet, the rest
+    # from the demand that stays: the block's mean exceeds 1.25 times the baseline, but
+    # by less than three standard errors of its spread; only the ratio alone would take
+    # it for a move of the demand
+    _, stream = demand_stream(7, 2500)
+    head = consolidating_fleet(space)
+    for z in stream[:2000]:
+        head.observe(z)
+    places = [NetPosition(e, 0.0) for e in range(NET.n_edges)]
+    reach = space.cost_matrix(list(head.state.positions), places).min(axis=0)
+    far = places[int(np.argmax(reach))]
+    block = list(stream[2000:2250])
+    for i in range(20):
+        block[i * 250 // 20] = far
+    targets = [*stream[:2000], *block, *stream[2250:]]
+    epochs = {}
+    for rule in (ConsolidationPolicy(), ConsolidationPolicy(shift_confidence=0.0)):
+        fleet = consolidating_fleet(space, policy=rule)
+        outcomes = [fleet.observe(z) for z in targets]
+        learning = fleet.state.learning
+        assert learning is not None
+        epochs[rule.shift_confidence] = learning.epoch
+        assert first_shift(outcomes, ConsolidationPolicy()) is None
+        assert first_shift(outcomes, ConsolidationPolicy(shift_confidence=0.0)) == 2250
+    assert epochs == {3.0: 0, 0.0: 2250}
 
 
 def test_mixed_types_or_speeds_never_consolidate_but_hold(space: RoadSpace) -> None:
