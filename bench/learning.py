@@ -1,7 +1,8 @@
 """Learning curves of every rule on every network, against the optimum and the batch answer.
 
-For each network, fleet size and seed: a hotspot demand (three hotspots, drawn
-from the seed) and its best p-median (the *optimum*); then, for each rule, the
+For each network, fleet size and seed: a demand (by default three hotspots drawn
+from the seed; ``--demand`` takes any of ``simulate``'s specs) and its best
+p-median (the *optimum*); then, for each rule, the
 exact expected cost of the fleet after 300, 1,000, 3,000, 10,000 and 30,000
 targets as a gap to the optimum, from three starts:
 
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import socket
 import statistics
@@ -42,7 +44,8 @@ from typing import Any
 import numpy as np
 
 from routing_svc.demand import DemandDistribution
-from routing_svc.demand.network import hotspot_mixture
+from routing_svc.demand.spec import DemandRecipe, Hotspots, network_demand, parse_demand_spec
+from routing_svc.errors import InvalidInput
 from routing_svc.network import RoadSpace, load_network
 from routing_svc.network.catalogue import resolve_network
 from routing_svc.optimum import MAX_SITES, expected_cost, solve_demand, solve_pmedian
@@ -59,6 +62,7 @@ NETWORKS = {
     "spider": "spider",
     "oneway": "oneway",
 }
+DEFAULT_DEMAND = "hotspots:3"
 CHECKPOINTS = (300, 1000, 3000, 10000, 30000)
 SHIFT_AT = 10000
 AFTER_SHIFT = (1000, 5000)
@@ -95,13 +99,23 @@ def optimum_of(
     return (best.objective, best.positions), best.matrix, best.sites
 
 
-def instance(net: str, n: int, seed: int) -> Instance:
+def instance(
+    net: str, n: int, seed: int, spec: str = DEFAULT_DEMAND, spread: float | None = None
+) -> Instance:
     network = load_network(resolve_network(NETWORKS[net]))
     space = RoadSpace(network)
-    demand = hotspot_mixture(network, centres=3, rng=np.random.default_rng([seed, 0]))
-    shifted = hotspot_mixture(network, centres=3, rng=np.random.default_rng([seed, 2]))
+    recipe = parse_demand_spec(spec)
+    if spread is not None and isinstance(recipe.form, Hotspots):
+        xmin, ymin, xmax, ymax = network.bounds
+        metres = spread * math.hypot(xmax - xmin, ymax - ymin)
+        recipe = DemandRecipe(Hotspots(recipe.form.count, metres), recipe.profile)
+    demand = network_demand(network, recipe, rng=np.random.default_rng([seed, 0]))
     optimum, matrix, sites = optimum_of(space, demand, n)
-    shifted_optimum, shifted_matrix, shifted_sites = optimum_of(space, shifted, n)
+    if isinstance(recipe.form, Hotspots):  # the hotspots move: new centres
+        shifted = network_demand(network, recipe, rng=np.random.default_rng([seed, 2]))
+        shifted_optimum, shifted_matrix, shifted_sites = optimum_of(space, shifted, n)
+    else:  # a demand without centres to move has no shift
+        shifted, shifted_optimum, shifted_matrix, shifted_sites = demand, optimum, matrix, sites
     edges = np.random.default_rng([seed, 3]).choice(network.n_edges, size=n, replace=False)
     start = [NetPosition(int(e), 0.0) for e in edges]
     return Instance(
@@ -211,11 +225,16 @@ def anchor_gaps(inst: Instance, n: int, seed: int, targets: int) -> dict[str, di
     return out
 
 
-def job(args: tuple[str, int, int, tuple[str, ...], tuple[str, ...], int]) -> dict[str, Any]:
-    net, n, seed, rules, scenarios, targets = args
+Job = tuple[str, int, int, tuple[str, ...], tuple[str, ...], int, str, float | None]
+
+
+def job(args: Job) -> dict[str, Any]:
+    net, n, seed, rules, scenarios, targets, spec, spread = args
     t0 = time.perf_counter()
-    inst = instance(net, n, seed)
+    inst = instance(net, n, seed, spec, spread)
     record: dict[str, Any] = {
+        "demand": spec,
+        "spread": spread,
         "network": net,
         "vehicles": n,
         "seed": seed,
@@ -342,11 +361,13 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def rest_curve(net: str, n: int, seed: int, targets: int) -> dict[str, Any]:
+def rest_curve(
+    net: str, n: int, seed: int, targets: int, spec: str, spread: float | None
+) -> dict[str, Any]:
     """The cold curve of the default rule through a live ``routing-svc serve``."""
     import httpx
 
-    inst = instance(net, n, seed)
+    inst = instance(net, n, seed, spec, spread)
     space = inst.space
     network = space.network
     port = free_port()
@@ -437,6 +458,18 @@ def main() -> int:
     p.add_argument("--rules", default="consolidating,paper,probe")
     p.add_argument("--scenarios", default="cold,warm,shift")
     p.add_argument("--targets", type=int, default=max(CHECKPOINTS))
+    p.add_argument(
+        "--demand",
+        default=DEFAULT_DEMAND,
+        help="where targets are, as simulate's --demand (default hotspots:3); a shift needs "
+        "hotspots",
+    )
+    p.add_argument(
+        "--spread",
+        type=float,
+        help="the hotspots' standard deviation as a fraction of the network's diagonal "
+        "(default 0.1)",
+    )
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--rest", action="store_true", help="add one curve through the REST API")
     p.add_argument("--out", type=Path, help="also write the JSON here")
@@ -457,8 +490,16 @@ def main() -> int:
     unknown = set(nets) - set(NETWORKS)
     if unknown:
         p.error(f"unknown networks {sorted(unknown)}; known: {sorted(NETWORKS)}")
+    try:
+        form = parse_demand_spec(args.demand).form
+    except InvalidInput as e:
+        p.error(str(e))
+    if args.spread is not None and not (math.isfinite(args.spread) and args.spread > 0.0):
+        p.error("--spread must be a fraction > 0")
+    if "shift" in scenarios and not isinstance(form, Hotspots):
+        p.error(f"a shift moves hotspots; --demand {args.demand} has none (--scenarios cold,warm)")
     work = [
-        (net, int(n), int(seed), rules, scenarios, args.targets)
+        (net, int(n), int(seed), rules, scenarios, args.targets, args.demand, args.spread)
         for net in nets
         for n in args.vehicles.split(",")
         for seed in args.seeds.split(",")
@@ -479,7 +520,10 @@ def main() -> int:
     summary = summarise(records, rules)
     report: dict[str, Any] = {
         "benchmark": "learning",
-        "demand": "hotspots:3",
+        "demand": args.demand
+        if args.summarise is None
+        else sorted({r.get("demand", DEFAULT_DEMAND) for r in records}),
+        "spread": args.spread,
         "baseline": {"compute": "probe (the compiled update of the rule before)"},
         "checkpoints": list(CHECKPOINTS),
         "shift": {"at": SHIFT_AT, "after": list(AFTER_SHIFT)},
@@ -490,7 +534,9 @@ def main() -> int:
         "seconds": time.perf_counter() - started,
     }
     if args.rest:
-        report["rest"] = rest_curve(nets[0], int(args.vehicles.split(",")[0]), 0, args.targets)
+        report["rest"] = rest_curve(
+            nets[0], int(args.vehicles.split(",")[0]), 0, args.targets, args.demand, args.spread
+        )
     text = json.dumps(report, indent=1)
     if args.out:
         args.out.write_text(text)
