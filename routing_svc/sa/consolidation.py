@@ -38,10 +38,11 @@ last replaced have grown by that factor, that period capped at ``slowest``, so t
 fleet whose consolidations keep being turned down (it has learnt a demand that
 stays) consolidates ever more rarely. The mean cost of
 each block of targets is compared with the mean cost expected of the references
-at the last consolidation; a block that costs ``shift_ratio`` times more, by more
-than ``shift_confidence`` standard errors of its mean (so that the heavy tail of a
-concentrated demand's costs is not taken for a move), starts a new epoch (the demand
-moved): the reservoir keeps that block only and the schedule starts again.
+at the last consolidation. Blocks in a row that each cost ``shift_ratio`` times more,
+together by more than ``shift_confidence`` standard errors of their mean (so that the
+heavy tail of a concentrated demand's costs is not taken for a move, while a moderate
+move shows within a few blocks), start a new epoch (the demand moved): the reservoir
+keeps the last block only and the schedule starts again.
 
 Each consolidation is recorded with the target that triggered it
 (:class:`Consolidation`), so that replay applies it without solving again.
@@ -99,11 +100,12 @@ class ConsolidationPolicy:
     block : int
         Targets per block of the shift test.
     shift_ratio : float
-        A block whose mean cost exceeds this times the baseline of the last
-        consolidation starts a new epoch (see :meth:`starts_epoch`).
+        Blocks whose mean cost exceeds this times the baseline of the last
+        consolidation can start a new epoch (see :meth:`starts_epoch`).
     shift_confidence : float
-        Standard errors of the block's mean (from the block's own spread) by which it
-        must exceed ``shift_ratio`` times the baseline; 0: the ratio alone decides.
+        Standard errors of the mean of such blocks in a row (from their own spread) by
+        which it must exceed ``shift_ratio`` times the baseline; 0: the ratio alone
+        decides, at the first such block.
     refit : float or None
         References that a consolidation fitted to ``m`` targets of the epoch give way to
         the fit of a reservoir of at least ``refit * m`` targets unless the
@@ -134,7 +136,7 @@ class ConsolidationPolicy:
     settled_confidence: float = 1.0
     block: int = 250
     shift_ratio: float = 1.25
-    shift_confidence: float = 3.0
+    shift_confidence: float = 2.0
     refit: float | None = 1.5
     fresh_baseline: bool = True
     checked_moves: bool = True
@@ -245,10 +247,11 @@ class ConsolidationPolicy:
     def starts_epoch(
         self, *, cost_sum: float, square_sum: float, size: int, baseline: float | None
     ) -> bool:
-        """Whether a block of ``size`` targets whose costs sum to ``cost_sum`` (their
-        squares to ``square_sum``) shows that the demand moved: its mean exceeds
-        :attr:`shift_ratio` times ``baseline`` by more than :attr:`shift_confidence`
-        standard errors of that mean. No baseline (no consolidation yet in the epoch): no.
+        """Whether ``size`` targets whose costs sum to ``cost_sum`` (their squares to
+        ``square_sum``), the blocks in a row that each exceeded the ratio, show that the
+        demand moved: their mean exceeds :attr:`shift_ratio` times ``baseline`` by more
+        than :attr:`shift_confidence` standard errors of that mean. No baseline (no
+        consolidation yet in the epoch): no.
         """
         if baseline is None or size < 2:
             return False

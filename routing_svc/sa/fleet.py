@@ -254,6 +254,9 @@ class Learning(Generic[P]):
     block_size: int = 0
     block_squares: float = 0.0
     """Sum of the squared costs of the current block (the shift test's spread)."""
+    run: tuple[float, float, int] = (0.0, 0.0, 0)
+    """The blocks in a row that exceeded the shift ratio: their costs' sum, their
+    squares' sum and their size (:meth:`ConsolidationPolicy.starts_epoch`)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -654,12 +657,22 @@ class Fleet(Generic[P]):
         learning.block_squares += cost * cost
         learning.block_size += 1
         if learning.block_size >= policy.block:
+            baseline = learning.baseline
+            mean = learning.block_cost / learning.block_size
+            if baseline is not None and mean > policy.shift_ratio * baseline:
+                total, squares, size = learning.run
+                learning.run = (
+                    total + learning.block_cost,
+                    squares + learning.block_squares,
+                    size + learning.block_size,
+                )
+            else:
+                learning.run = (0.0, 0.0, 0)
+            total, squares, size = learning.run
             if policy.starts_epoch(
-                cost_sum=learning.block_cost,
-                square_sum=learning.block_squares,
-                size=learning.block_size,
-                baseline=learning.baseline,
+                cost_sum=total, square_sum=squares, size=size, baseline=baseline
             ):
+                learning.run = (0.0, 0.0, 0)
                 recent = list(learning.reservoir)[-policy.block :]
                 learning.reservoir.clear()
                 learning.reservoir.extend(recent)
@@ -941,7 +954,11 @@ class Fleet(Generic[P]):
             "block_cost": learning.block_cost,
             "block_size": learning.block_size,
             **({} if policy.refit is None else {"fitted": learning.fitted}),
-            **({"block_squares": learning.block_squares} if policy.shift_confidence else {}),
+            **(
+                {"block_squares": learning.block_squares, "run": list(learning.run)}
+                if policy.shift_confidence
+                else {}
+            ),
         }
 
     def _learning_from(self, data: dict[str, Any]) -> Learning[P]:
@@ -969,6 +986,7 @@ class Fleet(Generic[P]):
             block_cost=float(data["block_cost"]),
             block_size=int(data["block_size"]),
             block_squares=float(data.get("block_squares", 0.0)),
+            run=_run_of(data.get("run", [0.0, 0.0, 0])),
             fitted=int(data.get("fitted", 0)),
         )
 
@@ -1062,3 +1080,10 @@ Solved = tuple[ConsolidationKey, Consolidation[P]]
 def _key(learning: Learning[Any]) -> ConsolidationKey:
     """The key of the consolidation due now (or next)."""
     return (learning.epoch, learning.next_consolidation)
+
+
+def _run_of(data: Any) -> tuple[float, float, int]:
+    """A stored run of the shift test (``[cost sum, square sum, size]``)."""
+    if not isinstance(data, list) or len(data) != 3:
+        raise InvalidInput("snapshot's shift-test run must be [cost sum, square sum, size]")
+    return float(data[0]), float(data[1]), int(data[2])

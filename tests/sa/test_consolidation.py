@@ -811,7 +811,7 @@ def test_policy_defaults() -> None:
     )
     assert (policy.refit, policy.fresh_baseline, policy.checked_moves) == (1.5, True, True)
     assert (policy.shakes, policy.slowest, policy.settled_confidence) == (20, 32_000, 1.0)
-    assert policy.shift_confidence == 3.0
+    assert policy.shift_confidence == 2.0
 
 
 Run = tuple[list[NetPosition], Fleet[NetPosition], list[Any]]
@@ -1038,9 +1038,10 @@ def block_means(outcomes: Sequence[Any], block: int) -> list[tuple[int, float]]:
 
 
 def first_shift(outcomes: Sequence[Any], policy: ConsolidationPolicy) -> int | None:
-    """The first block end whose mean cost exceeds ``shift_ratio`` times the baseline of the
-    last consolidation before it by more than ``shift_confidence`` standard errors of the
-    block's mean, from the outcomes alone."""
+    """The first block end where the blocks in a row whose mean cost exceeded
+    ``shift_ratio`` times the baseline of the last consolidation before them exceed it
+    together by more than ``shift_confidence`` standard errors of their mean, from the
+    outcomes alone."""
     baselines = {
         o.index + 1: (
             o.consolidation.fresh_baseline if policy.fresh_baseline else o.consolidation.baseline
@@ -1049,20 +1050,25 @@ def first_shift(outcomes: Sequence[Any], policy: ConsolidationPolicy) -> int | N
         if o.consolidation
     }
     costs = [o.dispatch.objective for o in outcomes]
+    run: list[float] = []
     for end, mean in block_means(outcomes, policy.block):
         earlier = [count for count in baselines if count < end]
         if not earlier:
             continue
-        excess = mean - policy.shift_ratio * baselines[max(earlier)]
-        error = statistics.stdev(costs[end - policy.block : end]) / math.sqrt(policy.block)
-        if excess > 0.0 and excess > policy.shift_confidence * error:
+        limit = policy.shift_ratio * baselines[max(earlier)]
+        if mean <= limit:
+            run = []
+            continue
+        run += costs[end - policy.block : end]
+        excess = statistics.fmean(run) - limit
+        if excess > policy.shift_confidence * statistics.stdev(run) / math.sqrt(len(run)):
             return end
     return None
 
 
 def test_the_shift_test_by_hand() -> None:
-    policy = ConsolidationPolicy()  # ratio 1.25, three standard errors
-    assert (policy.shift_ratio, policy.shift_confidence) == (1.25, 3.0)
+    policy = ConsolidationPolicy()  # ratio 1.25, two standard errors
+    assert (policy.shift_ratio, policy.shift_confidence) == (1.25, 2.0)
 
     def fires(costs: list[float], baseline: float | None, rule: ConsolidationPolicy) -> bool:
         return rule.starts_epoch(
@@ -1080,10 +1086,12 @@ def test_the_shift_test_by_hand() -> None:
     assert fires(outlier, 10.0, ConsolidationPolicy(shift_confidence=0.0))  # the ratio alone
     # a block that costs twice the baseline throughout: an excess of 7.5, error 0
     assert fires([20.0] * 250, 10.0, policy)
-    # the same mean with a spread of 5 (error 0.32): fires; made of 225 zeros and 25 far
-    # targets of 200 (spread 60.1, error 3.80, three of them 11.4 > 7.5): does not
+    # the same mean with a spread of 5 (error 0.32): fires; made of 230 zeros and 20 far
+    # targets of 250 (spread 68.0, error 4.30, two of them 8.6 > 7.5): does not
     assert fires([15.0, 25.0] * 125, 10.0, policy)
-    assert not fires([0.0] * 225 + [200.0] * 25, 10.0, policy)
+    assert not fires([0.0] * 230 + [250.0] * 20, 10.0, policy)
+    # two such blocks in a row (error 3.04, two of them 6.1 < 7.5): they do
+    assert fires(([0.0] * 230 + [250.0] * 20) * 2, 10.0, policy)
     # at the ratio, or without a baseline: never
     assert not fires([12.5] * 250, 10.0, policy)
     assert not fires([100.0] * 250, None, policy)
@@ -1159,7 +1167,7 @@ def test_a_shift_of_the_demand_starts_a_new_epoch(space: RoadSpace) -> None:
 def test_far_targets_in_a_block_of_a_demand_that_stays_start_no_epoch(space: RoadSpace) -> None:
     # 20 of the 250 targets of one block at the place farthest from the fleet, the rest
     # from the demand that stays: the block's mean exceeds 1.25 times the baseline, but
-    # by less than three standard errors of its spread; only the ratio alone would take
+    # by less than two standard errors of its spread; only the ratio alone would take
     # it for a move of the demand
     _, stream = demand_stream(7, 2500)
     head = consolidating_fleet(space)
@@ -1181,7 +1189,44 @@ def test_far_targets_in_a_block_of_a_demand_that_stays_start_no_epoch(space: Roa
         epochs[rule.shift_confidence] = learning.epoch
         assert first_shift(outcomes, ConsolidationPolicy()) is None
         assert first_shift(outcomes, ConsolidationPolicy(shift_confidence=0.0)) == 2250
-    assert epochs == {3.0: 0, 0.0: 2250}
+    assert epochs == {2.0: 0, 0.0: 2250}
+
+
+def test_far_targets_in_blocks_in_a_row_start_an_epoch_together(space: RoadSpace) -> None:
+    # 18 far targets in each of two blocks in a row (no consolidation between them at a
+    # growth of 1.5: 1,688, then 2,532): neither block alone exceeds 1.25 times the
+    # baseline by two standard errors, the two together do, at 2,500; the ratio alone
+    # starts the epoch at the first, 2,250
+    policy = ConsolidationPolicy(growth=1.5)
+    _, stream = demand_stream(7, 2750)
+    head = consolidating_fleet(space, policy=policy)
+    for z in stream[:2000]:
+        head.observe(z)
+    places = [NetPosition(e, 0.0) for e in range(NET.n_edges)]
+    reach = space.cost_matrix(list(head.state.positions), places).min(axis=0)
+    far = places[int(np.argmax(reach))]
+    targets = list(stream)
+    for start in (2000, 2250):
+        for i in range(18):
+            targets[start + i * 250 // 18] = far
+    fleet = consolidating_fleet(space, policy=policy)
+    outcomes = [fleet.observe(z) for z in targets]
+    done = [o.index + 1 for o in outcomes if o.consolidation is not None]
+    assert [d for d in done if 1688 <= d <= 2500] == [1688]
+    last = next(o.consolidation for o in outcomes[1687:1688] if o.consolidation is not None)
+    limit = policy.shift_ratio * last.fresh_baseline
+    costs = [o.dispatch.objective for o in outcomes]
+    for end in (2250, 2500):  # each block alone: above the ratio, within two errors
+        block = costs[end - 250 : end]
+        excess = statistics.fmean(block) - limit
+        assert 0.0 < excess <= 2.0 * statistics.stdev(block) / math.sqrt(250)
+    learning = fleet.state.learning
+    assert learning is not None and learning.epoch == 2500
+    assert first_shift(outcomes, policy) == 2500
+    alone = consolidating_fleet(space, policy=ConsolidationPolicy(growth=1.5, shift_confidence=0))
+    for z in targets:
+        alone.observe(z)
+    assert alone.state.learning is not None and alone.state.learning.epoch == 2250
 
 
 def test_mixed_types_or_speeds_never_consolidate_but_hold(space: RoadSpace) -> None:
