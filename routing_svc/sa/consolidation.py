@@ -70,6 +70,12 @@ beyond, an evenly spaced subset of the distinct targets, so that a consolidation
 is bounded whatever the spread of the demand."""
 
 
+ShiftRun = tuple[float, float, int]
+"""Targets of the shift test: the sum of their costs, of their squared costs, and their count."""
+
+NO_SHIFT_RUN: ShiftRun = (0.0, 0.0, 0)
+
+
 @dataclass(frozen=True, slots=True)
 class ConsolidationPolicy:
     """When and how a ``consolidating`` fleet consolidates (see the module docstring).
@@ -243,6 +249,15 @@ class ConsolidationPolicy:
         :attr:`longest`, else :attr:`confidence`."""
         settled = self._growth_of(due - epoch) >= self.longest
         return self.settled_confidence if settled else self.confidence
+
+    def shift_run(self, run: ShiftRun, block: ShiftRun, baseline: float | None) -> ShiftRun:
+        """The blocks in a row that exceed the ratio, after ``block``: ``run`` and
+        ``block`` added up where the block's mean cost exceeds :attr:`shift_ratio` times
+        ``baseline``, else none (each a cost sum, a squared-cost sum and a size)."""
+        total, squares, size = block
+        if baseline is None or size == 0 or total / size <= self.shift_ratio * baseline:
+            return NO_SHIFT_RUN
+        return run[0] + total, run[1] + squares, run[2] + size
 
     def starts_epoch(
         self, *, cost_sum: float, square_sum: float, size: int, baseline: float | None

@@ -45,11 +45,13 @@ import numpy as np
 from routing_svc.errors import Conflict, InvalidInput, NotFound, ReplayMismatch
 from routing_svc.sa.annealing import Annealing
 from routing_svc.sa.consolidation import (
+    NO_SHIFT_RUN,
     Consolidation,
     ConsolidationJob,
     ConsolidationKey,
     ConsolidationPolicy,
     SampleSpace,
+    ShiftRun,
     move_pays,
 )
 from routing_svc.sa.held_step import Hold, JunctionSpace, held_step
@@ -254,7 +256,7 @@ class Learning(Generic[P]):
     block_size: int = 0
     block_squares: float = 0.0
     """Sum of the squared costs of the current block (the shift test's spread)."""
-    run: tuple[float, float, int] = (0.0, 0.0, 0)
+    run: ShiftRun = NO_SHIFT_RUN
     """The blocks in a row that exceeded the shift ratio: their costs' sum, their
     squares' sum and their size (:meth:`ConsolidationPolicy.starts_epoch`)."""
 
@@ -657,22 +659,13 @@ class Fleet(Generic[P]):
         learning.block_squares += cost * cost
         learning.block_size += 1
         if learning.block_size >= policy.block:
-            baseline = learning.baseline
-            mean = learning.block_cost / learning.block_size
-            if baseline is not None and mean > policy.shift_ratio * baseline:
-                total, squares, size = learning.run
-                learning.run = (
-                    total + learning.block_cost,
-                    squares + learning.block_squares,
-                    size + learning.block_size,
-                )
-            else:
-                learning.run = (0.0, 0.0, 0)
+            block = (learning.block_cost, learning.block_squares, learning.block_size)
+            learning.run = policy.shift_run(learning.run, block, learning.baseline)
             total, squares, size = learning.run
             if policy.starts_epoch(
-                cost_sum=total, square_sum=squares, size=size, baseline=baseline
+                cost_sum=total, square_sum=squares, size=size, baseline=learning.baseline
             ):
-                learning.run = (0.0, 0.0, 0)
+                learning.run = NO_SHIFT_RUN
                 recent = list(learning.reservoir)[-policy.block :]
                 learning.reservoir.clear()
                 learning.reservoir.extend(recent)
@@ -1082,7 +1075,7 @@ def _key(learning: Learning[Any]) -> ConsolidationKey:
     return (learning.epoch, learning.next_consolidation)
 
 
-def _run_of(data: Any) -> tuple[float, float, int]:
+def _run_of(data: Any) -> ShiftRun:
     """A stored run of the shift test (``[cost sum, square sum, size]``)."""
     if not isinstance(data, list) or len(data) != 3:
         raise InvalidInput("snapshot's shift-test run must be [cost sum, square sum, size]")

@@ -1095,6 +1095,14 @@ def test_the_shift_test_by_hand() -> None:
     # at the ratio, or without a baseline: never
     assert not fires([12.5] * 250, 10.0, policy)
     assert not fires([100.0] * 250, None, policy)
+    # the blocks in a row: a block above the ratio adds to them, one at or below it (or
+    # without a baseline) ends them
+    run = policy.shift_run((0.0, 0.0, 0), (3500.0, 50_000.0, 250), 10.0)  # mean 14 > 12.5
+    assert run == (3500.0, 50_000.0, 250)
+    run = policy.shift_run(run, (3250.0, 45_000.0, 250), 10.0)  # mean 13
+    assert run == (6750.0, 95_000.0, 500)
+    assert policy.shift_run(run, (3125.0, 40_000.0, 250), 10.0) == (0.0, 0.0, 0)  # 12.5
+    assert policy.shift_run(run, (3500.0, 50_000.0, 250), None) == (0.0, 0.0, 0)
 
 
 def test_identical_vehicles_consolidate_on_the_schedule_whatever_their_common_speed(
