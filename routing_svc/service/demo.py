@@ -8,7 +8,7 @@ import logging
 import numpy as np
 from starlette.concurrency import run_in_threadpool
 
-from routing_svc.errors import RoutingSvcError, UnknownFleet
+from routing_svc.errors import Conflict, RoutingSvcError, UnknownFleet
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.networks import NetworkEntry
 from routing_svc.service.schemas import DemandSpec, EdgePosition, FleetSpec, TargetSpec, VehicleSpec
@@ -21,7 +21,11 @@ log = logging.getLogger("routing_svc.demo")
 
 
 def ensure_demo_fleet(service: FleetService, entry: NetworkEntry) -> None:
-    """Create the demo fleet (8 vehicles on random edges, hotspot demand) if it is missing."""
+    """Create the demo fleet (8 vehicles on random edges, hotspot demand) if it never existed.
+
+    A demo fleet that was deleted stays deleted (fleet ids are never reused), and one that
+    another instance on the same store created meanwhile is left as it is.
+    """
     try:
         service.get_fleet(DEMO_FLEET)
         return
@@ -42,7 +46,10 @@ def ensure_demo_fleet(service: FleetService, entry: NetworkEntry) -> None:
         vehicles=vehicles,
         reference_demand=DEMO_DEMAND,
     )
-    service.create_fleet(spec)
+    try:
+        service.create_fleet(spec)
+    except Conflict as exc:
+        log.info("demo fleet not created: %s", exc)
 
 
 async def feed_demo_targets(service: FleetService, rate: float) -> None:
