@@ -24,7 +24,9 @@ references were accepted, so that they were not fitted to it) is then priced fro
 the configuration solved without its fold, a cross-validated estimate of what
 solving again gains over the current references. Only if the
 gain exceeds ``confidence`` standard errors of the paired differences
-(``settled_confidence`` once the epoch's clock has reached ``longest``) is the
+(``settled_confidence`` once the epoch's clock has reached ``longest``; at least
+``unfitted_confidence`` while no consolidation of the epoch has fitted the references,
+which held steps then do not move either) is the
 problem solved on the whole reservoir, from the current and the last accepted
 references and from scratch, and the best replaces the references; each
 vehicle's step counter restarts at the number of reservoir targets it now
@@ -103,6 +105,13 @@ class ConsolidationPolicy:
         stayed for ``longest / (growth - 1)`` targets), where a fit of the reservoir
         is as good an estimate as it will get and a gain within the noise is no reason
         to move.
+    unfitted_confidence : float
+        The least confidence while the references are not a consolidation's fit of this
+        epoch's targets: those the fleet was created with (perhaps a good configuration,
+        perhaps not), or those of the demand before a shift. A fit of a few hundred
+        targets then faces references it knows nothing about, and a cross-validated gain
+        within the noise, taken, would replace a good configuration by a sample's noise.
+        Meanwhile held steps do not move the references either (0: neither).
     block : int
         Targets per block of the shift test.
     shift_ratio : float
@@ -140,6 +149,7 @@ class ConsolidationPolicy:
     folds: int = 4
     confidence: float = 0.0
     settled_confidence: float = 1.0
+    unfitted_confidence: float = 2.0
     block: int = 250
     shift_ratio: float = 1.25
     shift_confidence: float = 2.0
@@ -161,7 +171,7 @@ class ConsolidationPolicy:
             raise InvalidInput("the consolidation block must fit in the reservoir")
         if not (math.isfinite(self.growth) and self.growth > 1.0):
             raise InvalidInput("consolidation growth must be a finite number > 1")
-        for name in ("confidence", "settled_confidence", "shift_confidence"):
+        for name in ("confidence", "settled_confidence", "unfitted_confidence", "shift_confidence"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, float | int):
                 raise InvalidInput(f"consolidation {name} must be a number, got {value!r}")
@@ -204,15 +214,21 @@ class ConsolidationPolicy:
             **({"checked_moves": True} if self.checked_moves else {}),
             **({"shakes": self.shakes} if self.shakes else {}),
             **({"shift_confidence": self.shift_confidence} if self.shift_confidence else {}),
+            **(
+                {"unfitted_confidence": self.unfitted_confidence}
+                if self.unfitted_confidence
+                else {}
+            ),
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> ConsolidationPolicy:
         """A stored policy; one stored without ``refit``, ``fresh_baseline``,
-        ``checked_moves``, ``shakes``, ``slowest``, ``settled_confidence`` or
-        ``shift_confidence`` keeps the behaviour it was stored with (no refit, the
-        reservoir's baseline, unchecked moves, no shakes, the epoch's clock alone, one
-        confidence throughout, the shift test's ratio alone)."""
+        ``checked_moves``, ``shakes``, ``slowest``, ``settled_confidence``,
+        ``shift_confidence`` or ``unfitted_confidence`` keeps the behaviour it was stored
+        with (no refit, the reservoir's baseline, unchecked moves, no shakes, the epoch's
+        clock alone, one confidence throughout, the shift test's ratio alone, no more
+        asked of references no consolidation fitted)."""
         if not isinstance(data, dict):
             raise InvalidInput("consolidation must be an object")
         legacy = {
@@ -221,6 +237,7 @@ class ConsolidationPolicy:
             "checked_moves": False,
             "shakes": 0,
             "shift_confidence": 0.0,
+            "unfitted_confidence": 0.0,
         }
         unknown = set(data) - {*cls().to_dict(), *legacy, "slowest", "settled_confidence"}
         if unknown:
@@ -243,12 +260,14 @@ class ConsolidationPolicy:
         quiet = min(self._growth_of(now - max(epoch, accepted_at)), self.slowest)
         return now + max(clock, quiet)
 
-    def confidence_at(self, *, due: int, epoch: int) -> float:
+    def confidence_at(self, *, due: int, epoch: int, fitted: bool) -> float:
         """The confidence of the consolidation due at ``due`` in an epoch that began at
         ``epoch``: :attr:`settled_confidence` once the epoch's clock has reached
-        :attr:`longest`, else :attr:`confidence`."""
+        :attr:`longest`, else :attr:`confidence`; at least :attr:`unfitted_confidence`
+        unless the references are a consolidation's fit of this epoch (``fitted``)."""
         settled = self._growth_of(due - epoch) >= self.longest
-        return self.settled_confidence if settled else self.confidence
+        asked = self.settled_confidence if settled else self.confidence
+        return asked if fitted else max(asked, self.unfitted_confidence)
 
     def shift_run(self, run: ShiftRun, block: ShiftRun, baseline: float | None) -> ShiftRun:
         """The blocks in a row that exceed the ratio, after ``block``: ``run`` and

@@ -580,9 +580,11 @@ class Fleet(Generic[P]):
     ) -> Outcome[P]:
         """:meth:`observe` under the ``consolidating`` rule: the held step of the mover
         (:func:`~routing_svc.sa.held_step.held_step`; a move it would make is dropped,
-        with its pressure, unless :func:`~routing_svc.sa.consolidation.move_pays` on the
-        reservoir), then the shift test and, when due, a consolidation (see
-        :meth:`_learn_from` for ``recorded``, ``replaying`` and ``solved``)."""
+        with its pressure, while no consolidation of the epoch has fitted the references
+        (:attr:`ConsolidationPolicy.unfitted_confidence`) or unless
+        :func:`~routing_svc.sa.consolidation.move_pays` on the reservoir), then the shift
+        test and, when due, a consolidation (see :meth:`_learn_from` for ``recorded``,
+        ``replaying`` and ``solved``)."""
         dispatch, found = self._search(target, requires)
         state = self.state
         mover = found.mover
@@ -604,18 +606,26 @@ class Fleet(Generic[P]):
                 hold=learning.holds[mover],
                 window=self.config.window,
             )
-            if moved > 0.0 and policy.checked_moves and self._consolidates():
-                positions = state.positions
-                if not move_pays(
-                    cast(SampleSpace[P], space),
-                    positions,
-                    mover,
-                    new,
-                    list(learning.reservoir),
-                    power=self.config.objective.power,
-                    speed=float(self._speeds[mover]),
-                ):
-                    new, moved, hold = old, 0.0, None
+            if (
+                moved > 0.0
+                and self._consolidates()
+                and (
+                    (policy.unfitted_confidence and learning.fitted == 0)
+                    or (
+                        policy.checked_moves
+                        and not move_pays(
+                            cast(SampleSpace[P], space),
+                            state.positions,
+                            mover,
+                            new,
+                            list(learning.reservoir),
+                            power=self.config.objective.power,
+                            speed=float(self._speeds[mover]),
+                        )
+                    )
+                )
+            ):
+                new, moved, hold = old, 0.0, None
             learning.holds[mover] = hold
         else:
             new = space.advance(old, target, found.route, amount) if amount > 0.0 else old
@@ -736,7 +746,9 @@ class Fleet(Generic[P]):
             reservoir=tuple(learning.reservoir),
             power=self.config.objective.power,
             speed=float(self._speeds[0]),
-            confidence=policy.confidence_at(due=learning.next_consolidation, epoch=learning.epoch),
+            confidence=policy.confidence_at(
+                due=learning.next_consolidation, epoch=learning.epoch, fitted=learning.fitted > 0
+            ),
             updates=tuple(state.updates),
             fresh=state.targets - learning.accepted_at,
             folds=policy.folds,
@@ -946,7 +958,11 @@ class Fleet(Generic[P]):
             "accepted_at": learning.accepted_at,
             "block_cost": learning.block_cost,
             "block_size": learning.block_size,
-            **({} if policy.refit is None else {"fitted": learning.fitted}),
+            **(
+                {"fitted": learning.fitted}
+                if policy.refit is not None or policy.unfitted_confidence
+                else {}
+            ),
             **(
                 {"block_squares": learning.block_squares, "run": list(learning.run)}
                 if policy.shift_confidence

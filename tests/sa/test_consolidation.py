@@ -4,6 +4,7 @@ consolidates, replays, restores and follows a shift."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
@@ -640,6 +641,10 @@ def test_consolidate_rejects_mismatched_inputs(space: RoadSpace) -> None:
         {"shakes": -1},
         {"shift_confidence": -0.5},
         {"shift_confidence": math.inf},
+        {"unfitted_confidence": -1.0},
+        {"unfitted_confidence": math.nan},
+        {"unfitted_confidence": "2"},
+        {"unfitted_confidence": False},
     ],
 )
 def test_policy_validation(bad: dict[str, Any]) -> None:
@@ -673,6 +678,8 @@ def test_policy_round_trip() -> None:
         ConsolidationPolicy(shakes=0),
         ConsolidationPolicy(shift_confidence=0.0),
         ConsolidationPolicy(shift_confidence=1.5),
+        ConsolidationPolicy(unfitted_confidence=0.0),
+        ConsolidationPolicy(unfitted_confidence=3.5),
     ):
         data = json.loads(json.dumps(policy.to_dict()))
         assert ConsolidationPolicy.from_dict(data) == policy
@@ -686,6 +693,7 @@ def test_policy_round_trip() -> None:
         slowest=4000,
         settled_confidence=0.0,
         shift_confidence=0.0,
+        unfitted_confidence=0.0,
     )
     assert ConsolidationPolicy.from_dict({"confidence": 0.5}).settled_confidence == 0.5
     assert ConsolidationPolicy.from_dict({"longest": 300}).slowest == 300
@@ -811,7 +819,7 @@ def test_policy_defaults() -> None:
     )
     assert (policy.refit, policy.fresh_baseline, policy.checked_moves) == (1.5, True, True)
     assert (policy.shakes, policy.slowest, policy.settled_confidence) == (20, 32_000, 1.0)
-    assert policy.shift_confidence == 2.0
+    assert (policy.shift_confidence, policy.unfitted_confidence) == (2.0, 2.0)
 
 
 Run = tuple[list[NetPosition], Fleet[NetPosition], list[Any]]
@@ -870,12 +878,18 @@ def test_a_settled_demand_asks_more_of_a_consolidation(
     space: RoadSpace, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     policy = ConsolidationPolicy(
-        reservoir=400, first=50, longest=100, block=50, shift_ratio=1e9, settled_confidence=2.0
+        reservoir=400,
+        first=50,
+        longest=100,
+        block=50,
+        shift_ratio=1e9,
+        settled_confidence=2.0,
+        unfitted_confidence=0.0,
     )
     # by hand: the epoch's clock is a quarter of its targets, settled from 400 targets on
-    assert policy.confidence_at(due=396, epoch=0) == 0.0  # 99
-    assert policy.confidence_at(due=400, epoch=0) == 2.0  # 100
-    assert policy.confidence_at(due=1000, epoch=700) == 0.0  # a new epoch: 75
+    assert policy.confidence_at(due=396, epoch=0, fitted=True) == 0.0  # 99
+    assert policy.confidence_at(due=400, epoch=0, fitted=True) == 2.0  # 100
+    assert policy.confidence_at(due=1000, epoch=700, fitted=True) == 0.0  # a new epoch: 75
     asked: list[tuple[int, float]] = []
 
     def recording(
@@ -891,6 +905,60 @@ def test_a_settled_demand_asks_more_of_a_consolidation(
         fleet.observe(z)
     assert [c for _, c in asked] == [0.0 if math.ceil(k * 0.25) < 100 else 2.0 for k, _ in asked]
     assert {c for _, c in asked} == {0.0, 2.0}
+
+
+def test_references_no_consolidation_fitted_ask_more_and_hold_still(
+    space: RoadSpace, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    policy = ConsolidationPolicy(
+        reservoir=400, first=50, longest=100, block=50, shift_ratio=1e9, unfitted_confidence=2.5
+    )
+    # by hand: the larger of the epoch's confidence and the unfitted one, until a fit
+    assert policy.confidence_at(due=396, epoch=0, fitted=False) == 2.5
+    assert policy.confidence_at(due=396, epoch=0, fitted=True) == 0.0
+    assert policy.confidence_at(due=400, epoch=0, fitted=False) == 2.5  # settled: 1.0
+    assert policy.confidence_at(due=400, epoch=0, fitted=True) == 1.0
+    settled_high = ConsolidationPolicy(settled_confidence=3.0, unfitted_confidence=2.5)
+    assert settled_high.confidence_at(due=20_000, epoch=0, fitted=False) == 3.0
+    asked: list[tuple[int, int, float]] = []
+
+    def recording(
+        space_: Any, positions: Any, anchor: Any, reservoir: Any, **kw: Any
+    ) -> Consolidation[NetPosition]:
+        learning = fleet.state.learning
+        assert learning is not None
+        asked.append((fleet.state.targets, learning.fitted, kw["confidence"]))
+        return consolidate(space_, positions, anchor, reservoir, **kw)
+
+    monkeypatch.setattr("routing_svc.sa.consolidation.consolidate", recording)
+    _, stream = demand_stream(5, 1500)
+    runs = {}
+    for unfitted in (2.5, 0.0):
+        fleet = consolidating_fleet(
+            space, policy=dataclasses.replace(policy, unfitted_confidence=unfitted)
+        )
+        # a narrow window, so that held steps move often
+        assert fleet.config.window is not None
+        fleet.config = dataclasses.replace(fleet.config, window=fleet.config.window / 50)
+        start = list(fleet.state.positions)
+        outcomes, positions = [], []
+        for z in stream:
+            outcomes.append(fleet.observe(z))
+            positions.append(list(fleet.state.positions))
+        first = next(o.index for o in outcomes if o.consolidation and o.consolidation.accepted)
+        runs[unfitted] = (start, outcomes, positions, first)
+    start, outcomes, positions, first = runs[2.5]
+    gated = [c for _, fitted, c in asked[: len(asked) // 2] if fitted == 0]
+    assert gated and all(c == 2.5 for c in gated)
+    assert {c for _, fitted, c in asked[: len(asked) // 2] if fitted > 0} <= {0.0, 1.0}
+    # no held step moved a reference the fleet was created with before a fit replaced it
+    assert positions[:first] == [start] * first
+    assert positions[first] != start
+    # held steps move references again once a consolidation fitted them
+    assert any(o.moved_by > 0.0 for o in outcomes[first + 1 :])
+    # without the gate, held steps had moved the created references before that
+    _, ungated, _, first_ungated = runs[0.0]
+    assert any(o.moved_by > 0.0 for o in ungated[:first_ungated])
 
 
 def test_each_consolidation_tests_the_targets_since_the_last_acceptance(
@@ -918,7 +986,8 @@ def test_each_consolidation_tests_the_targets_since_the_last_acceptance(
         assert call["fresh"] == count - accepted_at
         assert call["reservoir"] == stream[:count]
         assert call["anchor"] == anchor
-        assert (call["power"], call["speed"], call["confidence"]) == (1.0, 1.0, CALM.confidence)
+        asked = CALM.confidence if accepted_at else CALM.unfitted_confidence
+        assert (call["power"], call["speed"], call["confidence"]) == (1.0, 1.0, asked)
         if done.accepted:
             accepted_at, anchor = count, list(done.positions)
         else:
@@ -1324,7 +1393,10 @@ def test_a_consolidating_config_stored_before_refit_keeps_its_behaviour_and_byte
     ).to_dict()
     assert stored["consolidation"]["refit"] == 1.5
     assert stored["consolidation"]["fresh_baseline"] is True
+    without_refit = {**stored, "consolidation": {**stored["consolidation"], "refit": None}}
+    newer = FleetConfig.from_dict(json.loads(json.dumps(without_refit)))
     del stored["consolidation"]["refit"], stored["consolidation"]["fresh_baseline"]
+    del stored["consolidation"]["unfitted_confidence"]
     old = FleetConfig.from_dict(json.loads(json.dumps(stored)))
     assert old.consolidation is not None
     assert old.consolidation.refit is None and old.consolidation.fresh_baseline is False
@@ -1332,6 +1404,10 @@ def test_a_consolidating_config_stored_before_refit_keeps_its_behaviour_and_byte
     # its fleet keeps no refit state in its snapshot, as before
     fleet = Fleet.create(space, [(Vehicle(f"v{i}"), p) for i, p in enumerate(poor_start(4))], old)
     assert "fitted" not in fleet.snapshot()["learning"]
+    # without refit but with the unfitted confidence, a snapshot keeps what it needs
+    assert newer.consolidation is not None and newer.consolidation.refit is None
+    fleet = Fleet.create(space, [(Vehicle(f"v{i}"), p) for i, p in enumerate(poor_start(4))], newer)
+    assert fleet.snapshot()["learning"]["fitted"] == 0
 
 
 def test_a_consolidating_config_round_trips(space: RoadSpace) -> None:
