@@ -149,7 +149,7 @@ class ConsolidationPolicy:
     folds: int = 4
     confidence: float = 0.0
     settled_confidence: float = 1.0
-    unfitted_confidence: float = 2.0
+    unfitted_confidence: float = 3.0
     block: int = 250
     shift_ratio: float = 1.25
     shift_confidence: float = 2.0

@@ -819,7 +819,7 @@ def test_policy_defaults() -> None:
     )
     assert (policy.refit, policy.fresh_baseline, policy.checked_moves) == (1.5, True, True)
     assert (policy.shakes, policy.slowest, policy.settled_confidence) == (20, 32_000, 1.0)
-    assert (policy.shift_confidence, policy.unfitted_confidence) == (2.0, 2.0)
+    assert (policy.shift_confidence, policy.unfitted_confidence) == (2.0, 3.0)
 
 
 Run = tuple[list[NetPosition], Fleet[NetPosition], list[Any]]
