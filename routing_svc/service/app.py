@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import gc
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -15,6 +14,7 @@ from fastapi.middleware.cors import CORSMiddleware
 
 from routing_svc import __version__
 from routing_svc.errors import Conflict, StorageError
+from routing_svc.long_lived import frozen_heap
 from routing_svc.network.identity import file_bytes_sha256
 from routing_svc.service import fleet_gauges
 from routing_svc.service.deadline import RequestDeadline
@@ -140,11 +140,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             # What start-up built (modules, networks, the app) lives as long as the
             # process: kept out of the cyclic garbage collector's full passes, which
             # otherwise scan it all and stall the event loop under load.
-            gc.collect()
-            gc.freeze()
-            yield
+            with frozen_heap():
+                yield
         finally:
-            gc.unfreeze()  # (another app in this process may start after this one)
             if feeder is not None:
                 feeder.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
