@@ -53,8 +53,10 @@ Each consolidation is recorded with the target that triggered it
 from __future__ import annotations
 
 import math
+import os
 from collections import Counter
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Generic, Protocol, runtime_checkable
 
@@ -494,12 +496,13 @@ def consolidate(
     costs /= speed
     costs **= power
     now = costs[actual].min(axis=0)
+    folds_tested = [(part, test, test > 0) for part, test in zip(parts, tests, strict=True)]
+    folds_tested = [fold for fold in folds_tested if fold[2].any()]
+    challengers = _fold_fits(
+        costs, weight, [part for part, _, _ in folds_tested], [current, anchored]
+    )
     differences, weights, tested_now = [], [], []
-    for part, test in zip(parts, tests, strict=True):
-        tested = test > 0
-        if not tested.any():
-            continue
-        challenger = best_fit(costs, weight - part, [current, anchored])
+    for (_, test, tested), challenger in zip(folds_tested, challengers, strict=True):
         differences.append((costs[challenger].min(axis=0) - now)[tested])
         weights.append(test[tested])
         tested_now.append(now[tested])
@@ -670,6 +673,17 @@ def best_fit(costs: FloatArray, weight: FloatArray, starts: list[IntArray]) -> I
     candidates.append(fast_interchange(seen, seen_weight, greedy(seen, seen_weight, p)))
     values = [_total(costs, weight, c) for c in candidates]
     return candidates[int(np.argmin(values))]
+
+
+def _fold_fits(
+    costs: FloatArray, weight: FloatArray, parts: list[FloatArray], starts: list[IntArray]
+) -> list[IntArray]:
+    """:func:`best_fit` of ``weight`` without each part, the parts solved side by side on
+    threads (the kernels release the GIL; each solve is the same as alone)."""
+    if len(parts) < 2:
+        return [best_fit(costs, weight - part, starts) for part in parts]
+    with ThreadPoolExecutor(max_workers=min(len(parts), os.cpu_count() or 1)) as pool:
+        return list(pool.map(lambda part: best_fit(costs, weight - part, starts), parts))
 
 
 def searched(costs: FloatArray, weight: FloatArray, sites: IntArray, shakes: int) -> IntArray:

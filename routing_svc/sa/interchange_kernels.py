@@ -50,7 +50,7 @@ from routing_svc.types import BoolArray, FloatArray, IntArray
 __all__ = ["best_swap", "gain_of", "lazy_greedy", "nearest_two", "relax_bounds"]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def lazy_greedy(c: FloatArray, w: FloatArray, p: int) -> IntArray:
     """The ``p`` sites of greedy addition, in the order they open."""
     n, m = c.shape
@@ -97,7 +97,7 @@ def lazy_greedy(c: FloatArray, w: FloatArray, p: int) -> IntArray:
     return picked
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _sift_down(
     bounds: FloatArray, nodes: IntArray, size: int, at: int, bound: float, node: int
 ) -> None:
@@ -126,7 +126,7 @@ def _sift_down(
         nodes[i] = node
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def nearest_two(
     c: FloatArray, sites: IntArray, c1: FloatArray, c2: FloatArray, a1: IntArray
 ) -> None:
@@ -151,7 +151,7 @@ def nearest_two(
                 c2[j] = value
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def best_swap(
     c: FloatArray,
     w: FloatArray,
@@ -200,7 +200,7 @@ def best_swap(
     return _best_of(rows, pending, bounds, losses, enter, leave, best)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _best_of(
     rows: IntArray,
     count: int,
@@ -220,7 +220,7 @@ def _best_of(
     return enter, leave, best
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _losses(
     c: FloatArray,
     w: FloatArray,
@@ -260,7 +260,7 @@ def _losses(
                 losses[k, a1[j]] += w[j] * fallback
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def gain_of(c: FloatArray, w: FloatArray, c1: FloatArray, i: int) -> float:
     """``gain_i = sum_j w_j min(c_ij - c1_j, 0)``, summed over ``j`` in ascending order."""
     gain = 0.0
@@ -271,7 +271,7 @@ def gain_of(c: FloatArray, w: FloatArray, c1: FloatArray, i: int) -> float:
     return gain
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def relax_bounds(
     c: FloatArray,
     w: FloatArray,

@@ -539,6 +539,21 @@ def test_consolidate_is_deterministic_and_its_record_round_trips(space: RoadSpac
     assert back.baseline == first.baseline
 
 
+def test_the_folds_solved_side_by_side_are_each_the_fold_solved_alone() -> None:
+    rng = np.random.default_rng(7)
+    costs = rng.uniform(0.0, 100.0, size=(120, 400))
+    weight = rng.integers(1, 4, size=400).astype(np.float64)
+    places = np.arange(400)
+    parts = [np.where(places % 4 == f, weight, 0.0) for f in range(4)]
+    starts = [np.arange(8, dtype=np.int64), np.arange(60, 68, dtype=np.int64)]
+    together = consolidation_module._fold_fits(costs, weight, parts, starts)
+    alone = [consolidation_module.best_fit(costs, weight - part, starts) for part in parts]
+    assert len(together) == 4
+    for fit, single in zip(together, alone, strict=True):
+        assert np.array_equal(fit, single)
+    assert len({tuple(sorted(fit.tolist())) for fit in together}) > 1  # the folds differ
+
+
 def record() -> Consolidation[NetPosition]:
     return Consolidation(True, (NetPosition(1, 0.0),), (4,), 8, 10.5, 9.25, -1.25, 0.5)
 
