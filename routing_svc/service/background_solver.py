@@ -14,8 +14,9 @@ so that a burst of targets does not outrun the schedule; the write path keeps su
 fleet's writes queued meanwhile (:meth:`PendingConsolidation.holds`) and goes on with
 the other fleets'.
 
-Processes, not threads: the solve (scipy's Dijkstra, the compiled interchange) holds
-the GIL, and a thread would stall the write path as much as solving inline.
+Processes, not threads: much of the solve (scipy's Dijkstra, the Python around the
+compiled interchange, whose kernels alone release the GIL) holds the GIL, and a thread
+would stall the write path almost as much as solving inline.
 """
 
 from __future__ import annotations
