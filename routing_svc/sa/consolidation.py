@@ -680,10 +680,15 @@ def _fold_fits(
 ) -> list[IntArray]:
     """:func:`best_fit` of ``weight`` without each part, the parts solved side by side on
     threads (the kernels release the GIL; each solve is the same as alone)."""
-    if len(parts) < 2:
-        return [best_fit(costs, weight - part, starts) for part in parts]
-    with ThreadPoolExecutor(max_workers=min(len(parts), os.cpu_count() or 1)) as pool:
-        return list(pool.map(lambda part: best_fit(costs, weight - part, starts), parts))
+
+    def fit(part: FloatArray) -> IntArray:
+        return best_fit(costs, weight - part, starts)
+
+    workers = min(len(parts), os.cpu_count() or 1)
+    if workers < 2:
+        return [fit(part) for part in parts]
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        return list(pool.map(fit, parts))
 
 
 def searched(costs: FloatArray, weight: FloatArray, sites: IntArray, shakes: int) -> IntArray:
