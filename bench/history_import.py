@@ -4,14 +4,17 @@ posted 50 targets at a time.
 A history of ``--calls`` calls at the buildings of Bad Hersfeld (edges of
 ``badhersfeld.buildings.csv``, weighted by building, a random offset) is written
 to CSV and imported in process into a 50-vehicle fleet (reading, checking,
-sorting, keyed chunks of ``--chunk-size``). The baseline, in the same run, posts
-the same calls, already resolved, in time order through the same domain call of
-``POST /v1/fleets/{id}/targets:batch`` at 50 targets per request into a twin
-fleet. Both fleets start at the p-median of the same history.
+sorting, keyed chunks of ``--chunk-size``), consolidations solved in
+``--consolidation-workers`` processes as the command does. The baseline, in the
+same run, posts the same calls, already resolved, in time order through the same
+domain call of ``POST /v1/fleets/{id}/targets:batch`` at 50 targets per request
+into a twin fleet. Both fleets start at the p-median of the same history; each
+fleet's log is then replayed and checked bit for bit.
 
 Usage::
 
     python bench/history_import.py [--calls 1000000] [--chunk-size 2000]
+        [--consolidation-workers 1]
 
 Prints one JSON document: calls/s and seconds of each, and their ratio.
 """
@@ -34,6 +37,7 @@ from routing_svc.history import (
     read_calls,
     replay_history,
 )
+from routing_svc.history.command import SERVER_CONSOLIDATION_WORKERS
 from routing_svc.long_lived import frozen_heap
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -64,10 +68,14 @@ def main() -> None:
     parser.add_argument("--vehicles", type=int, default=50)
     parser.add_argument("--chunk-size", type=int, default=2_000)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--consolidation-workers", type=int, default=SERVER_CONSOLIDATION_WORKERS)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="history_bench_") as tmp:
         folder = Path(tmp)
-        with InProcessHistoryClient(database_url=f"sqlite:///{folder / 'e.db'}") as client:
+        with InProcessHistoryClient(
+            database_url=f"sqlite:///{folder / 'e.db'}",
+            consolidation_workers=args.consolidation_workers,
+        ) as client:
             client.add_network(NETS / "badhersfeld.net.xml.gz", name="bh")
             entry = client.service.network("bh")
             net = entry.network
@@ -105,6 +113,10 @@ def main() -> None:
             same = (
                 client.get_fleet("import")["vehicles"] == client.get_fleet("baseline")["vehicles"]
             )
+            replayed = all(
+                client.service.verify(fleet)["snapshot_identical"] is True
+                for fleet in ("import", "baseline")
+            )
     print(
         json.dumps(
             {
@@ -122,7 +134,9 @@ def main() -> None:
                     "calls_per_second": args.calls / baseline,
                 },
                 "speed_ratio_import_over_baseline": baseline / imported,
+                "consolidation_workers": args.consolidation_workers,
                 "same_final_positions": same,
+                "replays_bit_for_bit": replayed,
                 "goal": "1,000,000 calls in under 60 s",
                 "extrapolated_seconds_for_1m": imported * 1_000_000 / args.calls,
             },

@@ -5,7 +5,7 @@ from one.
 
     routing-svc history import CALLS.csv --fleet ID [--db PATH | --database-url URL |
         --service-url URL [--net PATH]] [--on-bad-row refuse|skip] [--chunk-size N]
-        [--report DIR] [--thresholds 300,600,900]
+        [--report DIR] [--thresholds 300,600,900] [--consolidation-workers N]
     routing-svc history create-fleet CALLS.csv --net NET --vehicles N --fleet ID [...]
 
 In process (the default) the service's domain code runs on the database that
@@ -43,6 +43,7 @@ from routing_svc.history.replay import (
 from routing_svc.history.report import DEFAULT_THRESHOLDS, write_report
 from routing_svc.service.command import database_url_of
 from routing_svc.service.networks import NetworkEntry, NetworkRegistry
+from routing_svc.service.settings import Settings
 from routing_svc.types import NetPosition
 
 
@@ -56,6 +57,10 @@ def _thresholds(text: str) -> tuple[float, ...]:
     if not values or any(not v > 0 for v in values):
         raise argparse.ArgumentTypeError("thresholds must be positive numbers")
     return values
+
+
+SERVER_CONSOLIDATION_WORKERS: int = Settings.model_fields["consolidation_workers"].default
+"""The server's default, which an in-process import keeps."""
 
 
 def _where(p: argparse.ArgumentParser) -> None:
@@ -97,6 +102,14 @@ def add_parser(sub: Any) -> None:
         help="service-level thresholds in cost units (default 300,600,900)",
     )
     p.add_argument("--net", default=None, help="with --service-url and --report: the network file")
+    p.add_argument(
+        "--consolidation-workers",
+        type=int,
+        default=SERVER_CONSOLIDATION_WORKERS,
+        help="in process: processes that solve consolidations off the write path, as the "
+        f"server's (default {SERVER_CONSOLIDATION_WORKERS}); 0 solves each inside its "
+        "target, the same run on any machine",
+    )
     p.set_defaults(run=run_import)
     c = commands.add_parser("create-fleet", help="create a fleet at the p-median of a history")
     _where(c)
@@ -112,7 +125,13 @@ def _client(args: argparse.Namespace) -> HistoryClient:
         if args.db or args.database_url:
             raise InvalidInput("give --service-url or a database, not both")
         return HttpHistoryClient(args.service_url, api_key=args.api_key)
-    return InProcessHistoryClient(database_url=database_url_of(args.db, args.database_url))
+    workers = getattr(args, "consolidation_workers", 0)
+    if workers < 0:
+        raise InvalidInput(f"--consolidation-workers must be >= 0, got {workers}")
+    return InProcessHistoryClient(
+        database_url=database_url_of(args.db, args.database_url),
+        consolidation_workers=workers,
+    )
 
 
 def _entry(client: HistoryClient, network_id: str, net: str | None) -> NetworkEntry:

@@ -47,16 +47,32 @@ class InProcessFleetClient:
         Where the event log lives; a fresh SQLite file in a temporary folder by default.
     recent_window : int
         Targets in the "recent" mean cost.
+    consolidation_workers : int
+        Processes that solve due consolidations off the write path, as the server's
+        setting of that name (:mod:`routing_svc.service.background_solver`); 0 (the
+        default) solves each inside the target that made it due, so that a run is the
+        same whatever the machine's speed.
     """
 
-    def __init__(self, *, database_url: str | None = None, recent_window: int = 200) -> None:
+    def __init__(
+        self,
+        *,
+        database_url: str | None = None,
+        recent_window: int = 200,
+        consolidation_workers: int = 0,
+    ) -> None:
         self._tmp = tempfile.TemporaryDirectory(prefix="routing_svc_")
         url = database_url or f"sqlite:///{Path(self._tmp.name) / 'fleet.db'}"
         self.log = EventLog(url).open()
         self.networks = NetworkRegistry(
             data_dir=Path(self._tmp.name) / "networks", max_bytes=256 * 1024 * 1024
         )
-        self.service = FleetService(self.log, self.networks, recent_window=recent_window)
+        self.service = FleetService(
+            self.log,
+            self.networks,
+            recent_window=recent_window,
+            consolidation_workers=consolidation_workers,
+        )
 
     def close(self) -> None:
         self.service.close()

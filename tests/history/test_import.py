@@ -21,7 +21,7 @@ from routing_svc.history import (
 from routing_svc.history.replay import chunk_key
 from routing_svc.network import CompiledNetwork
 from routing_svc.network.snapping import point_on_edge
-from tests.history.conftest import cli, fleet_at, random_calls, write_csv
+from tests.history.conftest import DRT, cli, fleet_at, random_calls, write_csv
 
 
 def _import(client: InProcessHistoryClient, path: Path, fleet: str, **options: object):  # type: ignore[no-untyped-def]
@@ -200,3 +200,33 @@ def test_a_live_server_creates_the_fleet_the_process_creates_skipping_the_same_r
     lines = [[r["line"] for r in json.loads(out.stdout)["bad_rows"]] for out in (skipped, local)]
     assert lines == [[3, 5, 7, 9], [3, 5, 7, 9]]
     assert json.loads(skipped.stdout)["vehicles"] == json.loads(local.stdout)["vehicles"]
+
+
+def test_an_import_whose_consolidations_a_worker_solves_applies_each_call_once_and_replays(
+    tmp_path: Path, drt: CompiledNetwork
+) -> None:
+    calls = random_calls(drt, 1_200, seed=5)
+    path = write_csv(
+        tmp_path / "calls.csv",
+        ["time", "edge", "offset"],
+        [[c["time"], c["edge"], c["offset"]] for c in calls],
+    )
+    with InProcessHistoryClient(
+        database_url=f"sqlite:///{tmp_path / 'e.db'}", consolidation_workers=1
+    ) as client:
+        assert client.service.solver is not None
+        client.add_network(DRT, name="drt")
+        starts = [(calls[i]["edge"], 0.0) for i in range(4)]
+        client.create_fleet(fleet_at(starts, rule="consolidating"))
+        result = _import(client, path, "f", chunk_size=100)
+        assert (result.applied, result.version_after) == (1_200, 1_201)
+        in_order = sorted(calls, key=lambda c: c["time"])
+        assert _event_targets(client, "f") == [(c["edge"], c["offset"]) for c in in_order]
+        events = client.service.events("f", after=1, limit=10_000)
+        recorded = [e["seq"] for e in events if e["result"].get("consolidated")]
+        assert len(recorded) >= 3  # due at 250 targets, then every 25 % more
+        assert client.service.verify("f")["snapshot_identical"] is True
+        state = client.get_fleet("f")
+        again = _import(client, path, "f", chunk_size=100)
+        assert (again.applied, again.version_after) == (0, 1_201)
+        assert client.get_fleet("f") == state
