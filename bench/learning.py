@@ -20,7 +20,8 @@ counts. ``--rest`` adds one curve through the REST API of a live
 ``routing-svc serve`` (``targets:batch``).
 
 Run: ``python bench/learning.py`` (everything; long) or, e.g.,
-``python bench/learning.py --nets drt,bologna --seeds 0,1 --targets 10000``.
+``python bench/learning.py --nets drt,bologna --seeds 0,1 --targets 10000``; a network
+of your own is ``--nets town=town.net.xml.gz``.
 """
 
 from __future__ import annotations
@@ -76,6 +77,17 @@ GOALS: dict[str, Any] = {
 }
 
 
+def network_name(net: str) -> str:
+    """The name a ``--nets`` entry is reported under (``NAME`` or ``NAME=FILE``)."""
+    return net.partition("=")[0]
+
+
+def network_file(net: str) -> str:
+    """The SUMO network of a ``--nets`` entry: a known name, or ``NAME=FILE``."""
+    name, _, path = net.partition("=")
+    return str(resolve_network(path or NETWORKS[name]))
+
+
 @dataclass(frozen=True)
 class Instance:
     """A network, its demand (and the shifted one), their optima and a random start."""
@@ -102,7 +114,7 @@ def optimum_of(
 def instance(
     net: str, n: int, seed: int, spec: str = DEFAULT_DEMAND, spread: float | None = None
 ) -> Instance:
-    network = load_network(resolve_network(NETWORKS[net]))
+    network = load_network(network_file(net))
     space = RoadSpace(network)
     recipe = parse_demand_spec(spec)
     if spread is not None and isinstance(recipe.form, Hotspots):
@@ -235,7 +247,7 @@ def job(args: Job) -> dict[str, Any]:
     record: dict[str, Any] = {
         "demand": spec,
         "spread": spread,
-        "network": net,
+        "network": network_name(net),
         "vehicles": n,
         "seed": seed,
         "edges": inst.space.network.n_edges,
@@ -249,7 +261,11 @@ def job(args: Job) -> dict[str, Any]:
         }
     record["anchor"] = anchor_gaps(inst, n, seed, targets)
     record["seconds"] = time.perf_counter() - t0
-    print(f"{net} n={n} seed={seed}: {record['seconds']:.0f} s", file=sys.stderr, flush=True)
+    print(
+        f"{network_name(net)} n={n} seed={seed}: {record['seconds']:.0f} s",
+        file=sys.stderr,
+        flush=True,
+    )
     return record
 
 
@@ -385,7 +401,7 @@ def rest_curve(
             "--data-dir",
             str(folder),
             "--net",
-            f"{net}={resolve_network(NETWORKS[net])}",
+            f"{network_name(net)}={network_file(net)}",
             "--no-demo",
             "--log-level",
             "warning",
@@ -410,7 +426,8 @@ def rest_curve(
                 for i, p in enumerate(inst.random_start)
             ]
             created = client.post(
-                "/v1/fleets", json={"id": "bench", "network": net, "vehicles": vehicles}
+                "/v1/fleets",
+                json={"id": "bench", "network": network_name(net), "vehicles": vehicles},
             )
             created.raise_for_status()
             stream = inst.demand.sample(np.random.default_rng([seed, 1]), targets)
@@ -441,7 +458,7 @@ def rest_curve(
         server.terminate()
         server.wait(timeout=30)
     return {
-        "network": net,
+        "network": network_name(net),
         "vehicles": n,
         "seed": seed,
         "rule": rule,
@@ -452,7 +469,12 @@ def rest_curve(
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--nets", default=",".join(NETWORKS))
+    p.add_argument(
+        "--nets",
+        default=",".join(NETWORKS),
+        help="comma-separated: known names, or NAME=FILE for any SUMO network "
+        f"(default {','.join(NETWORKS)})",
+    )
     p.add_argument("--vehicles", default="8,20")
     p.add_argument("--seeds", default="0,1,2,3,4")
     p.add_argument("--rules", default="consolidating,paper,probe")
@@ -487,9 +509,14 @@ def main() -> int:
     rules = tuple(Rule(r).value for r in args.rules.split(","))
     scenarios = tuple(args.scenarios.split(","))
     nets = args.nets.split(",")
-    unknown = set(nets) - set(NETWORKS)
+    unknown = {net for net in nets if "=" not in net} - set(NETWORKS)
     if unknown:
-        p.error(f"unknown networks {sorted(unknown)}; known: {sorted(NETWORKS)}")
+        p.error(
+            f"unknown networks {sorted(unknown)}; known: {sorted(NETWORKS)}, or NAME=FILE.net.xml"
+        )
+    missing = [net for net in nets if "=" in net and not Path(net.partition("=")[2]).is_file()]
+    if missing:
+        p.error(f"no such network file: {', '.join(missing)}")
     try:
         form = parse_demand_spec(args.demand).form
     except InvalidInput as e:
