@@ -46,9 +46,9 @@ import numpy as np
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.demand.spec import DemandRecipe, Hotspots, network_demand, parse_demand_spec
-from routing_svc.errors import InvalidInput
+from routing_svc.errors import InvalidInput, UnknownNetwork
 from routing_svc.network import RoadSpace, load_network
-from routing_svc.network.catalogue import resolve_network
+from routing_svc.network.catalogue import named_network, resolve_network
 from routing_svc.optimum import MAX_SITES, expected_cost, solve_demand, solve_pmedian
 from routing_svc.sa import Fleet, Objective, Rule, Vehicle, learning_config
 from routing_svc.types import FloatArray, NetPosition
@@ -79,13 +79,13 @@ GOALS: dict[str, Any] = {
 
 def network_name(net: str) -> str:
     """The name a ``--nets`` entry is reported under (``NAME`` or ``NAME=FILE``)."""
-    return net.partition("=")[0]
+    return named_network(net)[0]
 
 
 def network_file(net: str) -> str:
     """The SUMO network of a ``--nets`` entry: a known name, or ``NAME=FILE``."""
-    name, _, path = net.partition("=")
-    return str(resolve_network(path or NETWORKS[name]))
+    path = named_network(net)[1]
+    return str(resolve_network(NETWORKS.get(path, path)))
 
 
 @dataclass(frozen=True)
@@ -509,14 +509,11 @@ def main() -> int:
     rules = tuple(Rule(r).value for r in args.rules.split(","))
     scenarios = tuple(args.scenarios.split(","))
     nets = args.nets.split(",")
-    unknown = {net for net in nets if "=" not in net} - set(NETWORKS)
-    if unknown:
-        p.error(
-            f"unknown networks {sorted(unknown)}; known: {sorted(NETWORKS)}, or NAME=FILE.net.xml"
-        )
-    missing = [net for net in nets if "=" in net and not Path(net.partition("=")[2]).is_file()]
-    if missing:
-        p.error(f"no such network file: {', '.join(missing)}")
+    try:
+        for net in nets:
+            network_file(net)
+    except (InvalidInput, UnknownNetwork) as e:
+        p.error(f"{e}; this benchmark's networks: {', '.join(NETWORKS)}, or NAME=FILE")
     try:
         form = parse_demand_spec(args.demand).form
     except InvalidInput as e:

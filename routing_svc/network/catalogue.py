@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from routing_svc.errors import InvalidNetwork, UnknownNetwork
+from routing_svc.errors import InvalidInput, InvalidNetwork, UnknownNetwork
 from routing_svc.network.sumo_tools import sumo_home, sumo_tool
 from routing_svc.paths import cache_root
 
@@ -259,6 +259,23 @@ def list_networks(*, out_dir: Path | None = None) -> list[NetInfo]:
     ]
     shipped = [net for net in _shipped() if net.name not in GENERATED]
     return generated + shipped
+
+
+def named_network(text: str) -> tuple[str, str]:
+    """``NAME=PATH`` as ``(name, path)``; a bare ``NAME`` is its own path
+    (a catalogue name or a file, for :func:`resolve_network`).
+
+    Raises
+    ------
+    InvalidInput
+        An empty name or path.
+    """
+    name, sep, path = text.partition("=")
+    if not sep:
+        name = path = text
+    if not name or not path:
+        raise InvalidInput(f"a network is NAME=PATH or NAME, got {text!r}")
+    return name, path
 
 
 def resolve_network(name_or_path: str | os.PathLike[str], *, out_dir: Path | None = None) -> Path:

@@ -8,15 +8,14 @@ from pathlib import Path
 from typing import Any
 
 from routing_svc.errors import InvalidInput
+from routing_svc.network.catalogue import named_network
 
 
 def _net_option(text: str) -> tuple[str, str]:
-    name, sep, path = text.partition("=")
-    if not sep:
-        name = path = text
-    if not name or not path:
-        raise argparse.ArgumentTypeError(f"--net takes NAME=PATH or NAME, got {text!r}")
-    return name, path
+    try:
+        return named_network(text)
+    except InvalidInput as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def add_parser(sub: Any) -> None:

@@ -10,13 +10,14 @@ import networkx as nx
 import pytest
 import sumolib
 
-from routing_svc.errors import UnknownNetwork
+from routing_svc.errors import InvalidInput, UnknownNetwork
 from routing_svc.network.catalogue import (
     GENERATED,
     add_parser,
     cache_dir,
     generate_network,
     list_networks,
+    named_network,
     resolve_network,
     run,
 )
@@ -114,6 +115,15 @@ def test_resolve_network(tmp_path: Path) -> None:
         resolve_network(tmp_path, out_dir=tmp_path)  # a folder is not a network
     with pytest.raises(UnknownNetwork):
         generate_network("drt", out_dir=tmp_path)  # shipped, not generated
+
+
+def test_named_network_splits_name_and_path() -> None:
+    assert named_network("town=/data/town.net.xml.gz") == ("town", "/data/town.net.xml.gz")
+    assert named_network("drt") == ("drt", "drt")  # a bare name is its own path
+    assert named_network("a=b=c") == ("a", "b=c")  # only the first '=' splits
+    for bad in ("", "=town.net.xml", "town="):
+        with pytest.raises(InvalidInput, match="NAME=PATH or NAME"):
+            named_network(bad)
 
 
 def parse(argv: list[str]) -> argparse.Namespace:
