@@ -134,6 +134,12 @@ def test_refuse_on_the_command_line_exits_2_with_the_lines(
     out = cli("history", "import", str(path), "--fleet", "f", "--db", db, "--quiet")
     assert out.returncode == 2
     assert all(f"line {n}:" in out.stderr for n in (3, 5, 7, 9))
+    negative = cli(
+        "history", "import", str(path), "--fleet", "f", "--db", db, "--quiet",
+        "--on-bad-row", "skip", "--consolidation-workers", "-1",
+    )  # fmt: skip
+    assert negative.returncode == 2
+    assert "--consolidation-workers must be >= 0, got -1" in negative.stderr
     again = cli(
         "history",
         "import",
