@@ -285,11 +285,10 @@ def section(experiment: Experiment, figures: dict[str, dict[str, Any]], pictures
         )
     lines += _why(figures, goal_checks(figures))
     if spec.mode == "incidents" and not goal_checks(figures)[2]["met"]:
-        requests = figures.get("sa", {}).get("requests", 0)
         lines.append(
-            f"- For incidents `optimum` is the hindsight p-median of the very {requests} "
-            f"incidents of the run for {spec.vehicles} vehicles, a bound no deployment reaches; "
-            "`sa` learnt from incidents recorded in another traffic realisation."
+            f"- For incidents `optimum`'s references are the p-median of {spec.incident_sample} "
+            "incidents recorded in the same traffic as the run (apart from the ones served); "
+            f"`sa` learnt from {spec.history} incidents recorded in another traffic realisation."
         )
     lines.append("")
     for kind, path in pictures.items():
@@ -359,7 +358,10 @@ summaries: `docs/figures/cosim/report.json`.
     are equal, the choice of learning vehicles changed no reference in that run
     (`--rule paper` compares the two choices under the paper's step alone).
   - `optimum`: the same dispatch, references frozen at the best-known p-median of the
-    demand (for incidents: the hindsight p-median of the realised incidents).
+    demand (for incidents: the p-median of {incident_sample} incidents recorded in the same
+    traffic as the run, apart from the ones served: an estimate of the incident
+    distribution, where a p-median of the served incidents themselves would place the
+    vehicles with hindsight).
   - `sumo-stop`: SUMO's taxi device alone, `greedy` dispatch every second, idle taxis stop
     where they dropped their customer.
   - `sumo-taxistand`: SUMO's taxi device alone, `greedy` dispatch, idle algorithm
@@ -472,6 +474,7 @@ def render(
         figures="Figures: `docs/figures/cosim/`. " if pictures else "",
         thresholds=", ".join(f"{t:g}" for t in DEFAULT_THRESHOLDS),
         missing=missing,
+        incident_sample=CosimSpec.__dataclass_fields__["incident_sample"].default,
     )
     summary = [
         *headline(all_figures),

@@ -109,6 +109,12 @@ def add_parser(subparsers: Any) -> None:
         "--resume", action="store_true", help="reuse the runs saved in --out for the same options"
     )
     p.add_argument("--history", type=int, default=0, help="historical requests sa learns first")
+    p.add_argument(
+        "--incident-sample",
+        type=int,
+        default=2000,
+        help="incidents: incidents recorded apart whose p-median is the optimum (default 2000)",
+    )
     p.add_argument("--ride-radius", type=float, default=1500.0, help="rides end within R metres")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -136,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
         shift_at=args.shift_at,
         ride_radius=args.ride_radius,
         history=args.history,
+        incident_sample=args.incident_sample,
         density=args.density,
         traffic_period=args.traffic_costs,
         cost=args.cost,

@@ -11,7 +11,8 @@ For each seed it writes the shared inputs (background traffic, the request
 stream as SUMO persons), then runs every policy as its own SUMO process (a
 pool of ``workers`` processes; libsumo allows one simulation per process),
 reads SUMO's outputs and evaluates the SA objective over time exactly against
-the true (or, for incidents, the realised) demand distribution.
+the true demand distribution (for incidents, a large sample of it recorded in the
+same traffic).
 """
 
 from __future__ import annotations

@@ -17,7 +17,8 @@
                     start positions (``assign`` only).
 ``optimum``         the service dispatches, reference positions frozen at the
                     (best-known) p-median of the true demand distribution; for
-                    incidents, of the realised requests (hindsight).
+                    incidents, of a large sample of incidents recorded in
+                    the same traffic apart from the requests served.
 ``sumo-stop``       SUMO's taxi device: ``greedy`` dispatch, idle taxis stop
                     where they are.
 ``sumo-circling``   SUMO's taxi device: ``greedy`` dispatch, idle taxis drive

@@ -4,7 +4,11 @@
 request stream (for ``incidents``, recorded in a SUMO run of the background
 traffic alone, in a worker process), draws the start positions and the
 historical requests, and solves the p-median that the ``optimum`` policy
-uses. :meth:`Prepared.evaluate` turns the recorded reference positions of
+uses: for ``persons``, of the known demand mixture; for ``incidents``, of
+``spec.incident_sample`` incidents recorded in the same background-only run
+as the evaluation stream but drawn apart from it (an estimate of the incident
+distribution: a p-median of the very incidents to be served would place
+vehicles with hindsight). :meth:`Prepared.evaluate` turns the recorded reference positions of
 each run into the exact expected free-flow wait under the demand in force
 (the SA objective over time).
 
@@ -79,6 +83,8 @@ class SeedInputs:
     start_vehicles: tuple[FleetVehicle, ...]
     optimum_vehicles: tuple[FleetVehicle, ...] | None
     optimum: Optimum | None
+    demand_sample: tuple[Request, ...] = ()
+    """``incidents``: the incidents recorded apart, whose p-median is ``optimum``."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,6 +99,9 @@ class IncidentJob:
     end: float
     ride_radius: float
     tripinfo: Path
+    stream: int = 1
+    """The random stream of the incidents' times and vehicles (``default_rng([seed,
+    stream])``): the evaluation stream and the distribution sample of one run differ."""
 
 
 def record_incidents(job: IncidentJob) -> list[Request]:
@@ -137,7 +146,7 @@ def _record(job: IncidentJob) -> list[Request]:
             backend,
             network,
             destinations,
-            rng=np.random.default_rng([job.seed, 1]),
+            rng=np.random.default_rng([job.seed, job.stream]),
             rate_per_hour=job.rate,
             start=job.start,
             end=job.end,
@@ -181,7 +190,7 @@ class Prepared:
     def _demand(self, seed: SeedInputs, time: float) -> DemandDistribution[NetPosition]:
         if self.phases is not None:
             return demand_at(self.phases, time)
-        return empirical_demand(self.network, seed.requests)
+        return empirical_demand(self.network, seed.demand_sample or seed.requests)
 
     def optimum_for(self, demand: DemandDistribution[NetPosition]) -> Optimum:
         """The p-median of ``demand``, over the stands if there are any."""
@@ -237,8 +246,9 @@ def _phases(spec: CosimSpec, network: CompiledNetwork) -> list[Phase]:
 
 def _incidents(
     spec: CosimSpec, net: Path, workdirs: dict[int, Path], trips: dict[int, Path], *, progress: bool
-) -> tuple[dict[int, list[Request]], dict[int, list[Request]]]:
-    """Recorded incident streams (evaluation and history) of every seed, in parallel."""
+) -> tuple[dict[int, list[Request]], dict[int, list[Request]], dict[int, list[Request]]]:
+    """Recorded incident streams of every seed, in parallel: the evaluation stream, the
+    distribution sample (the same traffic, another random stream) and the history."""
     start, stop = spec.warmup, spec.warmup + spec.duration
     jobs = [
         IncidentJob(
@@ -250,6 +260,21 @@ def _incidents(
             stop,
             spec.ride_radius,
             workdirs[s] / "tripinfo-background.xml",
+        )
+        for s in spec.seeds
+    ]
+    sample_rate = spec.incident_sample * 3600.0 / spec.duration
+    jobs += [
+        IncidentJob(
+            net,
+            trips[s],
+            s,
+            sample_rate,
+            start,
+            stop,
+            spec.ride_radius,
+            workdirs[s] / "tripinfo-sample.xml",
+            stream=2,
         )
         for s in spec.seeds
     ]
@@ -284,8 +309,9 @@ def _incidents(
     )
     n = len(spec.seeds)
     requests = dict(zip(spec.seeds, recorded[:n], strict=True))
-    history = dict(zip(spec.seeds, recorded[n:], strict=True)) if spec.history > 0 else {}
-    return requests, history
+    sample = dict(zip(spec.seeds, recorded[n : 2 * n], strict=True))
+    history = dict(zip(spec.seeds, recorded[2 * n :], strict=True)) if spec.history > 0 else {}
+    return requests, sample, history
 
 
 def cosim_stands(spec: CosimSpec) -> StandReading | None:
@@ -363,8 +389,9 @@ def prepare_seeds(
             ]
             for s in spec.seeds
         }
+        sample: dict[int, list[Request]] = {}
     else:
-        requests, history = _incidents(spec, net, workdirs, trips, progress=progress)
+        requests, sample, history = _incidents(spec, net, workdirs, trips, progress=progress)
     prepared = Prepared(spec, net, network, space, phases, [], stands)
     shared: Optimum | None = None
     if phases is not None:
@@ -374,8 +401,8 @@ def prepare_seeds(
         persons = write_persons(workdirs[seed] / "requests.rou.xml", requests[seed])
         starts = start_positions(network, spec.vehicles, rng=np.random.default_rng([seed, 2]))
         optimum = shared
-        if optimum is None and requests[seed]:
-            optimum = prepared.optimum_for(empirical_demand(network, requests[seed]))
+        if optimum is None and sample.get(seed):
+            optimum = prepared.optimum_for(empirical_demand(network, sample[seed]))
         seeds.append(
             SeedInputs(
                 seed=seed,
@@ -386,6 +413,7 @@ def prepare_seeds(
                 start_vehicles=fleet_vehicles(network, starts, prefix="fleet"),
                 optimum_vehicles=None if optimum is None else _at_stands(network, optimum, stands),
                 optimum=optimum,
+                demand_sample=tuple(sample.get(seed, ())),
             )
         )
     prepared.seeds = seeds

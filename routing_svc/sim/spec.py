@@ -47,6 +47,10 @@ class CosimSpec:
         Rides end within this straight-line distance (m) of the request, if possible.
     history : int
         Historical requests that ``sa`` and ``sa-floor`` learn from before the run.
+    incident_sample : int
+        ``incidents``: incidents recorded in the same background-only run, apart
+        from the evaluation stream, whose p-median is the ``optimum``'s references
+        (an estimate of the incident distribution, not the realised requests).
     density : float
         Background traffic: randomTrips' insertion density (vehicles per hour
         and km of road).
@@ -90,6 +94,7 @@ class CosimSpec:
     shift_at: float | None = None
     ride_radius: float = 1500.0
     history: int = 0
+    incident_sample: int = 2000
     density: float = 10.0
     traffic_period: float | None = None
     cost: Literal["time", "length"] = "time"
@@ -110,6 +115,8 @@ class CosimSpec:
             raise InvalidInput("need >= 1 vehicle, seed, policy and worker")
         if self.history < 0:
             raise InvalidInput("history must be >= 0")
+        if self.incident_sample < 1:
+            raise InvalidInput("incident_sample must be >= 1")
         for name in ("duration", "rate", "density", "ride_radius"):
             if not math.isfinite(getattr(self, name)) or getattr(self, name) <= 0.0:
                 raise InvalidInput(f"{name} must be a finite number > 0")

@@ -69,6 +69,7 @@ def incidents_result(
         mode="incidents",
         policies=parse_policies("sa,static,optimum,sumo-stop,sumo-circling"),
         history=50,
+        incident_sample=300,
         workers=2,
     )
     return run_cosim(spec, out_dir=tmp_path_factory.mktemp("incidents"), progress=False)

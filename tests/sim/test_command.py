@@ -48,3 +48,17 @@ def test_cosim_command_rejects_unknown_policies(grid_net: Path, tmp_path: Path) 
 def test_bad_seeds_are_an_argparse_error() -> None:
     with pytest.raises(SystemExit):
         _parse(["--seeds", "a,b"])
+
+
+def test_an_incident_sample_below_one_is_refused_before_anything_runs(
+    grid_net: Path, tmp_path: Path
+) -> None:
+    from routing_svc.errors import InvalidInput
+
+    out = tmp_path / "out"
+    args = _parse(
+        ["--net", str(grid_net), "--mode", "incidents", "--incident-sample", "0", "--out", str(out)]
+    )
+    with pytest.raises(InvalidInput, match="incident_sample"):
+        args.run(args)
+    assert not out.exists()

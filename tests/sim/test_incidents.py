@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import math
 
+import pytest
 from defusedxml import ElementTree
 
 from routing_svc.sim import CosimResult
+from routing_svc.sim.scenario import empirical_demand, expected_wait
 
 
 def test_incidents_are_served_by_every_policy(incidents_result: CosimResult) -> None:
@@ -35,9 +37,21 @@ def test_incidents_happen_where_background_vehicles_drive(incidents_result: Cosi
     assert incidents_result.spec.warmup <= times[0] and times[-1] < 120.0 + 900.0
 
 
-def test_hindsight_optimum_of_the_realised_incidents(incidents_result: CosimResult) -> None:
+def test_optimum_is_the_p_median_of_incidents_recorded_apart(
+    incidents_result: CosimResult,
+) -> None:
+    prepared = incidents_result.prepared
+    assert prepared is not None
+    (seed,) = prepared.seeds
+    sample = seed.demand_sample
+    assert abs(len(sample) - incidents_result.spec.incident_sample) <= 0.5 * len(sample)
+    assert len(sample) > 3 * len(seed.requests)
     best = incidents_result.optimum[3]
     assert best is not None and len(best.positions) == 4
+    on_sample = expected_wait(
+        prepared.space, best.positions, empirical_demand(prepared.network, sample)
+    )
+    assert on_sample == pytest.approx(best.expected_cost, rel=1e-9)
     (static,) = incidents_result.by_policy()["static"]
     static_value = incidents_result.curves[("static", 3)][0][1]
     assert best.expected_cost <= static_value + 1e-9
