@@ -38,6 +38,7 @@ from routing_svc.sim import CosimResult, CosimSpec, PolicyRun, parse_policies, r
 from routing_svc.sim.command import parse_seeds
 from routing_svc.sim.measures import DEFAULT_THRESHOLDS
 from routing_svc.sim.plots import write_figures
+from routing_svc.sim.spec import DEFAULT_INCIDENT_SAMPLE
 
 ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared" / "nets"
@@ -474,7 +475,7 @@ def render(
         figures="Figures: `docs/figures/cosim/`. " if pictures else "",
         thresholds=", ".join(f"{t:g}" for t in DEFAULT_THRESHOLDS),
         missing=missing,
-        incident_sample=CosimSpec.__dataclass_fields__["incident_sample"].default,
+        incident_sample=DEFAULT_INCIDENT_SAMPLE,
     )
     summary = [
         *headline(all_figures),

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from routing_svc.errors import InvalidInput
+from routing_svc.sim.spec import DEFAULT_INCIDENT_SAMPLE
 
 __all__ = ["add_parser", "parse_seeds", "run"]
 
@@ -112,8 +113,9 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument(
         "--incident-sample",
         type=int,
-        default=2000,
-        help="incidents: incidents recorded apart whose p-median is the optimum (default 2000)",
+        default=DEFAULT_INCIDENT_SAMPLE,
+        help="incidents: incidents recorded apart whose p-median is the optimum "
+        f"(default {DEFAULT_INCIDENT_SAMPLE})",
     )
     p.add_argument("--ride-radius", type=float, default=1500.0, help="rides end within R metres")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")

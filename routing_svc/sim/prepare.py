@@ -8,9 +8,9 @@ uses: for ``persons``, of the known demand mixture; for ``incidents``, of
 ``spec.incident_sample`` incidents recorded in the same background-only run
 as the evaluation stream but drawn apart from it (an estimate of the incident
 distribution: a p-median of the very incidents to be served would place
-vehicles with hindsight). :meth:`Prepared.evaluate` turns the recorded reference positions of
-each run into the exact expected free-flow wait under the demand in force
-(the SA objective over time).
+vehicles with hindsight). :meth:`Prepared.evaluate` turns the recorded
+reference positions of each run into the exact expected free-flow wait under
+the demand in force (the SA objective over time).
 
 History: the requests of an earlier period that the ``sa`` policy learns from
 before the run (as a deployed service would have). For ``persons`` they are
@@ -178,6 +178,10 @@ class Prepared:
     seeds: list[SeedInputs]
     stands: StandReading | None = None
     """The usable stands of ``spec.stands``, if given."""
+    _sampled: dict[int, DemandDistribution[NetPosition]] = dataclasses.field(
+        default_factory=dict, repr=False
+    )
+    """``incidents``: each seed's distribution sample as a demand, built once."""
 
     @property
     def typical_cost(self) -> float:
@@ -190,7 +194,16 @@ class Prepared:
     def _demand(self, seed: SeedInputs, time: float) -> DemandDistribution[NetPosition]:
         if self.phases is not None:
             return demand_at(self.phases, time)
-        return empirical_demand(self.network, seed.demand_sample or seed.requests)
+        return self.incident_demand(seed.seed, seed.demand_sample or seed.requests)
+
+    def incident_demand(
+        self, seed: int, incidents: Sequence[Request]
+    ) -> DemandDistribution[NetPosition]:
+        """``incidents`` (a seed's distribution sample) as a demand, built once per seed."""
+        demand = self._sampled.get(seed)
+        if demand is None:
+            demand = self._sampled[seed] = empirical_demand(self.network, incidents)
+        return demand
 
     def optimum_for(self, demand: DemandDistribution[NetPosition]) -> Optimum:
         """The p-median of ``demand``, over the stands if there are any."""
@@ -402,7 +415,7 @@ def prepare_seeds(
         starts = start_positions(network, spec.vehicles, rng=np.random.default_rng([seed, 2]))
         optimum = shared
         if optimum is None and sample.get(seed):
-            optimum = prepared.optimum_for(empirical_demand(network, sample[seed]))
+            optimum = prepared.optimum_for(prepared.incident_demand(seed, sample[seed]))
         seeds.append(
             SeedInputs(
                 seed=seed,

@@ -14,7 +14,10 @@ from typing import Any, Literal
 from routing_svc.errors import InvalidInput
 from routing_svc.sim.policies import DEFAULT_POLICIES, POLICIES, Policy
 
-__all__ = ["CosimSpec"]
+__all__ = ["DEFAULT_INCIDENT_SAMPLE", "CosimSpec"]
+
+DEFAULT_INCIDENT_SAMPLE = 2000
+"""Incidents recorded apart whose p-median is the ``optimum`` of an ``incidents`` run."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -94,7 +97,7 @@ class CosimSpec:
     shift_at: float | None = None
     ride_radius: float = 1500.0
     history: int = 0
-    incident_sample: int = 2000
+    incident_sample: int = DEFAULT_INCIDENT_SAMPLE
     density: float = 10.0
     traffic_period: float | None = None
     cost: Literal["time", "length"] = "time"
