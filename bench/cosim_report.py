@@ -344,11 +344,15 @@ summaries: `docs/figures/cosim/report.json`.
     positions and the service's travel times). The co-simulation reports every state
     change SUMO makes to the service (`POST .../vehicles/state:batch`, one batch per
     simulation step): `busy` at dispatch, `available` with the current position at the
-    drop-off, the positions of available vehicles that drive back to their references
-    (every 30 s while they move). An answer `queued` (nobody available) puts the request
-    in a FIFO queue; at each drop-off the queue is served first, oldest first, asking
-    `POST .../assign` again (read-only). After a drop-off a vehicle drives back to its
-    reference and parks; an idle vehicle whose reference moves drives to the new one.
+    drop-off, the positions of available vehicles that drive to their posts (every 30 s
+    while they move). An answer `queued` (nobody available) puts the request in a FIFO
+    queue; at each drop-off the queue is served first, oldest first, asking
+    `POST .../assign` again (read-only). Idle vehicles wait at the posts the service
+    names (`GET .../posts`, asked again whenever a vehicle turns busy or available or a
+    reference moves): with `k` vehicles available, the `k` references that serve the
+    recent targets best, held by the available vehicles at the least total travel time
+    (move-up; with every vehicle available, all the references). An idle vehicle whose
+    post changes drives to the new one and parks.
     Whose reference learns is the paper's choice, `learning_vehicles=all` (the closest
     reference moves, busy or not), with the {rule} learning rule; the fleet starts at the
     p-median of {history} historical requests.

@@ -58,6 +58,8 @@ class FleetClient(Protocol):
 
     def metrics(self, fleet_id: str) -> dict[str, Any]: ...
 
+    def posts(self, fleet_id: str) -> dict[str, Any]: ...
+
 
 _STATUS_ERRORS: dict[int, type[errors.RoutingSvcError]] = {
     404: errors.NotFound,
@@ -163,3 +165,7 @@ class HttpFleetClient:
 
     def metrics(self, fleet_id: str) -> dict[str, Any]:
         return self._json(self._http.get(f"/v1/fleets/{fleet_id}/metrics"))
+
+    def posts(self, fleet_id: str) -> dict[str, Any]:
+        """``GET .../posts``: where each available vehicle should wait now."""
+        return self._json(self._http.get(f"/v1/fleets/{fleet_id}/posts"))

@@ -64,6 +64,7 @@ from routing_svc.sa.live import (
     sent_from,
 )
 from routing_svc.sa.objectives import Objective
+from routing_svc.sa.posts import Post, fleet_posts
 from routing_svc.sa.requirements import build_requirement
 from routing_svc.sa.schedules import Counting, Schedule, schedule_from_dict
 from routing_svc.sa.space import DirectedSpace, P, Requirement, SingleTargetServing, Space
@@ -501,6 +502,30 @@ class Fleet(Generic[P]):
                 new = VehicleState(new.status, new.position, last)
             states[index] = new
         self.state.vehicle_states = states
+
+    def posts(self) -> list[Post[P]]:
+        """Where each available vehicle should wait now (:func:`routing_svc.sa.posts.fleet_posts`),
+        on the reservoir of recent targets as the demand sample (the references themselves
+        without one); changes nothing.
+
+        Raises
+        ------
+        InvalidInput
+            If the space has no cost matrix.
+        """
+        if not _offers(type(self.space), "cost_matrix"):
+            raise InvalidInput("posts need a space with a cost matrix")
+        space = cast(SampleSpace[P], self.space)
+        learning = self.state.learning
+        return fleet_posts(
+            space.cost_matrix,
+            references=self.state.positions,
+            speeds=self._speeds,
+            types=self._types,
+            states=self.state.vehicle_states,
+            sample=list(learning.reservoir) if learning is not None else [],
+            power=self.config.objective.power,
+        )
 
     def assign(self, target: P, requires: Sequence[str] | None = None) -> Dispatch[P]:
         """Who would go now (:attr:`Dispatch.sent`) and whose reference would move;

@@ -327,6 +327,26 @@ class FleetService:
                 "objective": d.objective,
             }
 
+    def posts(self, fleet_id: str) -> dict[str, Any]:
+        """Where each available vehicle should wait now (:meth:`Fleet.posts`); changes
+        nothing."""
+        with self._locked(fleet_id):
+            runtime = self._runtime(fleet_id)
+            fleet = runtime.fleet
+            ids = [v.id for v in fleet.vehicles]
+            return {
+                "version": runtime.version,
+                "posts": [
+                    {
+                        "vehicle": ids[post.vehicle],
+                        "position": runtime.entry.describe(post.position),
+                        "reference_of": ids[post.reference_of],
+                        "time": post.time,
+                    }
+                    for post in fleet.posts()
+                ],
+            }
+
     def submit_vehicle_states(
         self,
         fleet_id: str,

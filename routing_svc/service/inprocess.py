@@ -150,3 +150,6 @@ class InProcessFleetClient:
 
     def metrics(self, fleet_id: str) -> dict[str, Any]:
         return self.service.metrics(fleet_id)
+
+    def posts(self, fleet_id: str) -> dict[str, Any]:
+        return self.service.posts(fleet_id)

@@ -304,6 +304,22 @@ class Assignment(Answer):
     objective: Number
 
 
+class PostAnswer(Answer):
+    """Where one available vehicle should wait now."""
+
+    vehicle: str
+    position: DescribedPosition
+    reference_of: str = Field(description="The vehicle whose reference the post is.")
+    time: Number = Field(description="Travel time from the vehicle's current position.")
+
+
+class Posts(Answer):
+    """Where the available vehicles should wait while others are busy (nothing changes)."""
+
+    version: int
+    posts: list[PostAnswer]
+
+
 class BackedOff(Answer):
     """A vehicle moved back by the probe rule, and where to."""
 

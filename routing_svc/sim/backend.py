@@ -251,17 +251,21 @@ class _ApiBackend:
             raise SimulationError(f"{vehicle} is crossing a junction; send it home later")
         stopped = bool(vehicle_api.isStopped(vehicle))
         try:
-            # Plan the new route and parking stop while the vehicle still holds its
-            # current stop (e.g. the drop-off): if SUMO refuses, nothing has changed
-            # and the vehicle does not drive off the end of its old route.
-            pending = len(vehicle_api.getStops(vehicle))
-            for index in range(pending - 1, 0 if stopped else -1, -1):
-                vehicle_api.replaceStop(vehicle, index, "")  # an empty edge deletes it
+            # Plan the new route before the vehicle gives up its current stops (e.g.
+            # the drop-off, or the way to a former home): if SUMO finds none, nothing
+            # has changed and the vehicle does not drive off the end of its old route.
             speed = float(vehicle_api.getSpeed(vehicle))
             braking = speed * speed / (2.0 * BRAKING) + 1.0
             ahead = road == edge and self.lane_position(vehicle) + braking < offset
-            if road == edge and not ahead:
-                vehicle_api.setRoute(vehicle, self._loop(road, edge))
+            vtype = str(vehicle_api.getTypeID(vehicle))
+            loop = self._loop(road, edge, vtype) if road == edge and not ahead else None
+            if loop is None and not math.isfinite(self.route_time(road, edge, vtype)):
+                raise SimulationError(f"no route for {vehicle} from {road} to {where}")
+            pending = len(vehicle_api.getStops(vehicle))
+            for index in range(pending - 1, 0 if stopped else -1, -1):
+                vehicle_api.replaceStop(vehicle, index, "")  # an empty edge deletes it
+            if loop is not None:
+                vehicle_api.setRoute(vehicle, loop)
             else:
                 vehicle_api.changeTarget(vehicle, edge)
             stop()
@@ -286,14 +290,18 @@ class _ApiBackend:
             self._lanes[edge] = lane
         return lane
 
-    def _loop(self, here: str, edge: str) -> list[str]:
-        """The fastest route from ``here`` that leaves the edge and comes back to ``edge``."""
+    def _loop(self, here: str, edge: str, vtype: str) -> list[str]:
+        """The fastest route for vehicle type ``vtype`` from ``here`` that leaves the edge
+        and comes back to ``edge``."""
         best: list[str] = []
         best_time = math.inf
         for lane in range(int(self.api.edge.getLaneNumber(here))):
             for link in self.api.lane.getLinks(f"{here}_{lane}"):
                 following = str(link[0]).rsplit("_", 1)[0]
-                route = self.api.simulation.findRoute(following, edge)
+                try:
+                    route = self.api.simulation.findRoute(following, edge, vType=vtype)
+                except self._error:  # an edge this type may not use
+                    continue
                 if route.edges and route.travelTime < best_time:
                     best, best_time = [here, *route.edges], float(route.travelTime)
         if not best:

@@ -100,6 +100,13 @@ def add_parser(subparsers: Any) -> None:
         metavar="FILE.add.xml",
         help="park at the usable parkingAreas of a SUMO additional file (stands)",
     )
+    p.add_argument(
+        "--move-up",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="idle vehicles wait at the service's posts (GET .../posts, default), or at their "
+        "own references (--no-move-up)",
+    )
     p.add_argument("--seeds", type=parse_seeds, default=(0,), help="comma list of seeds")
     p.add_argument("--workers", type=int, default=2, help="parallel SUMO processes")
     p.add_argument("--service-url", default=None, help="a running service (default: in-process)")
@@ -156,6 +163,7 @@ def run(args: argparse.Namespace) -> int:
         workers=args.workers,
         rule=args.rule,
         stands=None if args.stands is None else str(args.stands),
+        move_up=args.move_up,
     )
     result = run_cosim(spec, out_dir=args.out, progress=not args.quiet, resume=args.resume)
     if not args.no_plots:

@@ -25,12 +25,16 @@ After every simulation step, :meth:`FleetDispatcher.on_step`:
    FIFO queue; ``partial`` sends the vehicles named (the first carries the
    customer, the others drive to the pick-up and wait with it) and queues
    the rest;
-4. sends every idle vehicle whose reference is elsewhere to its reference
-   (after a drop-off, or when a learning step moved it); a fleet with stands
+4. with ``move_up``, whenever a vehicle became busy or available or a reference
+   moved, asks where the available vehicles should wait (``GET .../posts``: the
+   references that serve the demand best with as many vehicles as are free);
+5. sends every idle vehicle whose home (its post with ``move_up``, else its
+   reference) is elsewhere to it (after a drop-off, or when a learning step or
+   the posts moved it); a fleet with stands
    sends it to its stand instead (the fleet's ``stands``, read again after
    every learning step), where it parks in the stand's SUMO parkingArea, or
    on the road beside it when the parkingArea has no room left (counted);
-5. sends the state changes of the step in one batch.
+6. sends the state changes of the step in one batch.
 
 Before any question to the service the staged changes are sent, so an
 answer never names a vehicle that was dispatched a moment ago.
@@ -192,6 +196,9 @@ class FleetDispatcher:
     stands : sequence of Stand, optional
         The parkingAreas the fleet's stands were made of: idle vehicles park
         in them (:func:`stand_homes`). ``None``: they park at their references.
+    move_up : bool
+        Idle vehicles wait at the posts the service names (``GET .../posts``)
+        instead of their own references; not with ``stands``.
     """
 
     def __init__(
@@ -208,6 +215,7 @@ class FleetDispatcher:
         snapshot_period: float = 300.0,
         position_period: float = 30.0,
         stands: Sequence[Stand] | None = None,
+        move_up: bool = False,
     ) -> None:
         self.backend = backend
         self.client = client
@@ -220,6 +228,10 @@ class FleetDispatcher:
         self.snapshot_period = snapshot_period
         self.position_period = position_period
         self.stands = tuple(stands) if stands is not None else None
+        self.move_up = move_up and stands is None
+        self.posts: dict[str, Position] = {}
+        """With ``move_up``: where each available vehicle waits now."""
+        self._posts_due = self.move_up
         self.references: dict[str, Position] = {}
         """Where each idle vehicle waits: its reference, or its stand with stands."""
         self.areas: dict[str, Stand] = {}
@@ -259,6 +271,8 @@ class FleetDispatcher:
             self._serve_queue()
         for reservation in self.backend.new_reservations():
             self._request(reservation)
+        if self._posts_due:
+            self._read_posts()
         self._send_home()
         if now >= self._next_positions:
             self._report_moving()
@@ -317,12 +331,29 @@ class FleetDispatcher:
         self._update_references(moved)
 
     def _update_references(self, moved: Mapping[str, Position]) -> None:
-        """New references; an idle vehicle whose reference moved drives to the new one."""
+        """New references; an idle vehicle whose reference moved drives to the new one
+        (with ``move_up``: the posts are asked for again)."""
         for vehicle, position in moved.items():
             before = self.references.get(vehicle)
             self.references[vehicle] = position
-            if before is not None and before != position and vehicle not in self.busy:
+            if before is not None and before != position:
+                self._posts_due = self.move_up
+                if vehicle not in self.busy and not self.move_up:
+                    self.homeless.add(vehicle)
+
+    def _read_posts(self) -> None:
+        """Ask where the available vehicles should wait; those whose post changed drive
+        to the new one."""
+        self._posts_due = False
+        self._flush()
+        for post in self.client.posts(self.fleet_id)["posts"]:
+            vehicle = str(post["vehicle"])
+            position = _position(post["position"])
+            if vehicle in self.busy or vehicle in self.gone:
+                continue
+            if self.posts.get(vehicle, self.references.get(vehicle)) != position:
                 self.homeless.add(vehicle)
+            self.posts[vehicle] = position
 
     def _ask(self, reservation: Reservation, requires: Sequence[str] | None, *, learn: bool) -> Any:
         """The service's answer for a request (after sending the staged states)."""
@@ -406,6 +437,7 @@ class FleetDispatcher:
         self.busy.add(vehicle)
         self.homeless.discard(vehicle)
         self.sent_to.pop(vehicle, None)
+        self._posts_due = self.move_up
         self.log.dispatched[reservation.person] = vehicle
         self._stage(vehicle, "busy")
         return True
@@ -417,6 +449,7 @@ class FleetDispatcher:
         self.busy.add(vehicle)
         self.homeless.discard(vehicle)
         self.sent_to.pop(vehicle, None)
+        self._posts_due = self.move_up
         self.escorts[vehicle] = waiting.carrier
         self._stage(vehicle, "busy")
         try:
@@ -432,6 +465,7 @@ class FleetDispatcher:
             self.gone.add(vehicle)
             self.log.lost.append(vehicle)
             self._stage(vehicle, "offline")
+            self._posts_due = self.move_up
         self.busy.discard(vehicle)
         self.homeless.discard(vehicle)
         self.sent_to.pop(vehicle, None)
@@ -472,6 +506,7 @@ class FleetDispatcher:
             self.carrying.pop(vehicle, None)
             self._stage(vehicle, "available", position=self.place(vehicle))
             self.homeless.add(vehicle)
+            self._posts_due = self.move_up
         return bool(done)
 
     def _report_moving(self) -> None:
@@ -522,5 +557,5 @@ class FleetDispatcher:
                 self.sent_to[vehicle] = area.id
                 return
             self.log.unparked += 1
-        edge, offset = self.references[vehicle]
+        edge, offset = self.posts.get(vehicle, self.references[vehicle])
         self.backend.park_at(vehicle, edge, offset)

@@ -112,6 +112,8 @@ class PolicyJob:
         The fleet's learning rule (``None``: the service's default).
     stands : tuple of Stand
         The usable stands of ``stands_file`` (parkingAreas).
+    move_up : bool
+        Idle vehicles wait at the service's posts (``GET .../posts``).
     stands_file : Path, optional
         A SUMO additional file with those parkingAreas: a policy that
         :attr:`~routing_svc.sim.policies.Policy.uses_stands` waits at them
@@ -140,6 +142,7 @@ class PolicyJob:
     rule: str | None = None
     stands: tuple[Stand, ...] = ()
     stands_file: Path | None = None
+    move_up: bool = False
 
     @property
     def at_stands(self) -> bool:
@@ -345,6 +348,7 @@ def run_policy(job: PolicyJob) -> PolicyRun:
                 traffic_period=job.traffic_period or 60.0,
                 snapshot_period=job.snapshot_period,
                 stands=job.stands if job.at_stands else None,
+                move_up=job.move_up,
             )
 
         def step_once() -> float:

@@ -83,6 +83,10 @@ class CosimSpec:
         stands (:func:`~routing_svc.network.stands.usable_stands`): the service's
         fleets are restricted to them and park in them when idle, the
         ``optimum`` is solved over them, and ``sumo-taxistand`` uses them.
+    move_up : bool
+        The service's idle vehicles wait at the posts it names (``GET .../posts``)
+        instead of their own references (every policy the service dispatches; not
+        with ``stands``); ``False``: each at its own reference.
     """
 
     network: str
@@ -110,6 +114,7 @@ class CosimSpec:
     snapshot_period: float = 300.0
     rule: str | None = None
     stands: str | None = None
+    move_up: bool = True
 
     def __post_init__(self) -> None:
         if self.mode not in ("persons", "incidents"):

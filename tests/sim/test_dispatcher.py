@@ -131,3 +131,52 @@ def test_a_vehicle_that_leaves_the_simulation_is_reported_offline(
     assert dispatcher.log.lost == ["v0"] and dispatcher.log.orphaned == ["p1"]
     assert _statuses(client) == {"v0": "offline", "v1": "available"}
     assert [v for _, v, _, _ in backend.parked] == ["v1", "v1"]
+
+
+@pytest.mark.parametrize("move_up", [True, False])
+def test_with_move_up_a_free_vehicle_holds_a_busy_ones_reference_until_it_is_back(
+    grid_net: Path, move_up: bool
+) -> None:
+    starts = {"v0": "A1A2", "v1": "B1B2", "v2": "F5F4"}
+    with InProcessFleetClient() as client:
+        network = client.add_network(grid_net, name="grid")["id"]
+        vehicles = [{"id": v, "position": {"edge": e, "offset": 100.0}} for v, e in starts.items()]
+        client.create_fleet(
+            {"id": "f", "network": network, "cost": "time", "rule": "paper", "vehicles": vehicles}
+        )
+        backend = FakeBackend(
+            positions=starts, reservations=[_reservation(1, 1.0, "F4F5")], service_seconds=100.0
+        )
+        dispatcher = FleetDispatcher(backend, client, "f", learn=False, move_up=move_up)
+        _run(backend, dispatcher, 50)
+        assert [d.vehicle for d in backend.dispatches] == ["v2"]
+        covering = [(v, e) for _, v, e, _ in backend.parked if v != "v2"]
+        if not move_up:
+            assert covering == []
+            return
+        # v0 and v1 wait side by side: the far reference of v2 is the better second post
+        posts = {p["vehicle"]: p for p in client.posts("f")["posts"]}
+        assert set(posts) == {"v0", "v1"} and {p["reference_of"] for p in posts.values()} != {
+            "v0",
+            "v1",
+        }
+        (mover,) = [v for v, p in posts.items() if p["reference_of"] == "v2"]
+        assert covering == [(mover, "F5F4")]
+        assert dispatcher.posts[mover] == ("F5F4", 100.0)
+        _run_more(backend, dispatcher, 100)  # v2 is free again, at the drop-off (C3C4)
+        # every reference is held again; v2 takes over the reference its cover left,
+        # which costs less driving than both going back
+        last = {v: (e, o) for _, v, e, o in backend.parked}
+        assert last == {mover: ("F5F4", 100.0), "v2": (starts[mover], 100.0)}
+        held = {p["vehicle"]: p["reference_of"] for p in client.posts("f")["posts"]}
+        assert held == {
+            mover: "v2",
+            "v2": mover,
+            ({"v0", "v1"} - {mover}).pop(): ({"v0", "v1"} - {mover}).pop(),
+        }
+
+
+def _run_more(backend: FakeBackend, dispatcher: FleetDispatcher, seconds: int) -> None:
+    for _ in range(seconds):
+        backend.step()
+        dispatcher.on_step()

@@ -21,6 +21,7 @@ from routing_svc.service.responses import (
     READ,
     WRITE,
     Assignment,
+    Posts,
     TargetBatchResult,
     TargetResult,
     TravelTimesResult,
@@ -154,6 +155,14 @@ async def post_target_batch(
 async def assign(fleet_id: str, target: TargetSpec, service: Service) -> dict[str, Any]:
     """Who would serve this target; changes nothing."""
     return await run_in_threadpool(service.assign, fleet_id, target)
+
+
+@router.get("/posts", response_model=Posts, responses=FOUND)
+async def posts(fleet_id: str, service: Service) -> dict[str, Any]:
+    """Where each available vehicle should wait now: per type, the references of all its
+    vehicles that serve the recent targets best with as many vehicles as are available,
+    held by the available ones at the least total travel time; changes nothing."""
+    return await run_in_threadpool(service.posts, fleet_id)
 
 
 @router.put("/traveltimes", response_model=TravelTimesResult, responses=WRITE | FOUND | CONFLICT)
