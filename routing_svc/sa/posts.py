@@ -75,6 +75,11 @@ class Post(Generic[P]):
     time: float
 
 
+def _finite(costs: FloatArray) -> FloatArray:
+    """``costs`` with infinite (unreachable) entries replaced by :data:`UNREACHABLE`."""
+    return np.minimum(np.nan_to_num(costs, posinf=UNREACHABLE), UNREACHABLE)
+
+
 def choose_posts(site_costs: FloatArray, k: int, *, exact_work: int = EXACT_WORK) -> IntArray:
     """The ``k`` sites (rows of ``site_costs``, service costs ``c(T)`` to each sample
     target) that minimise the sample's total cost, in ascending order; every site when
@@ -87,7 +92,7 @@ def choose_posts(site_costs: FloatArray, k: int, *, exact_work: int = EXACT_WORK
     n_sites, n_targets = site_costs.shape
     if k >= n_sites:
         return np.arange(n_sites, dtype=np.int64)
-    costs = np.minimum(np.nan_to_num(site_costs, posinf=UNREACHABLE), UNREACHABLE)
+    costs = _finite(site_costs)
     if math.comb(n_sites, k) * n_targets <= exact_work:
         return _enumerated(costs, k)
     weights = np.ones(n_targets, dtype=np.float64)
@@ -111,7 +116,7 @@ def _enumerated(costs: FloatArray, k: int) -> IntArray:
 def match_posts(travel: FloatArray) -> IntArray:
     """For each vehicle (row), the post (column) it holds: the assignment of least
     total travel time (square matrix)."""
-    costs = np.minimum(np.nan_to_num(travel, posinf=UNREACHABLE), UNREACHABLE)
+    costs = _finite(travel)
     rows, columns = linear_sum_assignment(costs)
     matched = np.empty(costs.shape[0], dtype=np.int64)
     matched[rows] = columns

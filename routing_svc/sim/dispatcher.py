@@ -337,9 +337,14 @@ class FleetDispatcher:
             before = self.references.get(vehicle)
             self.references[vehicle] = position
             if before is not None and before != position:
-                self._posts_due = self.move_up
+                self._posts_changed()
                 if vehicle not in self.busy and not self.move_up:
                     self.homeless.add(vehicle)
+
+    def _posts_changed(self) -> None:
+        """Availability or a reference changed: with ``move_up``, ask for the posts again
+        at the end of the step."""
+        self._posts_due = self.move_up
 
     def _read_posts(self) -> None:
         """Ask where the available vehicles should wait; those whose post changed drive
@@ -437,7 +442,7 @@ class FleetDispatcher:
         self.busy.add(vehicle)
         self.homeless.discard(vehicle)
         self.sent_to.pop(vehicle, None)
-        self._posts_due = self.move_up
+        self._posts_changed()
         self.log.dispatched[reservation.person] = vehicle
         self._stage(vehicle, "busy")
         return True
@@ -449,7 +454,7 @@ class FleetDispatcher:
         self.busy.add(vehicle)
         self.homeless.discard(vehicle)
         self.sent_to.pop(vehicle, None)
-        self._posts_due = self.move_up
+        self._posts_changed()
         self.escorts[vehicle] = waiting.carrier
         self._stage(vehicle, "busy")
         try:
@@ -465,7 +470,7 @@ class FleetDispatcher:
             self.gone.add(vehicle)
             self.log.lost.append(vehicle)
             self._stage(vehicle, "offline")
-            self._posts_due = self.move_up
+            self._posts_changed()
         self.busy.discard(vehicle)
         self.homeless.discard(vehicle)
         self.sent_to.pop(vehicle, None)
@@ -506,7 +511,7 @@ class FleetDispatcher:
             self.carrying.pop(vehicle, None)
             self._stage(vehicle, "available", position=self.place(vehicle))
             self.homeless.add(vehicle)
-            self._posts_due = self.move_up
+            self._posts_changed()
         return bool(done)
 
     def _report_moving(self) -> None:
