@@ -32,4 +32,6 @@ export ROUTING_SVC_TEST_PG_URL=${ROUTING_SVC_TEST_PG_URL:-postgresql+psycopg://p
 "$PYTHON" -m ruff format --check routing_svc tests bench sumo_nets
 "$PYTHON" -m mypy
 
-"$PYTHON" -m pytest "$@"
+# one pytest worker per core (PYTEST_WORKERS, default 2); a test file stays on one worker,
+# so a module's fixtures (a SUMO run, a server) are built once
+"$PYTHON" -m pytest -n "${PYTEST_WORKERS:-2}" --dist loadfile "$@"

@@ -9,6 +9,7 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
+from routing_svc.service.write_path import committer as committer_module
 from routing_svc.service.write_path.committer import COMMIT_HANDOFF_WAIT, Committer
 from tests.helpers import blocked_until, handoff_timeouts, run
 
@@ -39,8 +40,11 @@ def test_commits_run_in_order_on_the_thread_and_answer_on_the_loop(
 
 
 def test_the_hand_over_returns_once_the_thread_has_taken_the_commit(
-    committer: Committer,
+    committer: Committer, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    # a wait that a loaded machine cannot outlast: what is checked is that the hand-over
+    # returns after the thread took the commit and before the commit finished
+    monkeypatch.setattr(committer_module, "COMMIT_HANDOFF_WAIT", 60.0)
     release = threading.Event()
     before = handoff_timeouts()
 
