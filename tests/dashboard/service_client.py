@@ -92,6 +92,12 @@ class ServiceClient:
         result: dict[str, Any] = r.json()
         return result
 
+    def posts(self, fleet_id: str) -> dict[str, Any]:
+        r = self.http.get(f"/v1/fleets/{fleet_id}/posts")
+        assert r.status_code == 200, r.text
+        result: dict[str, Any] = r.json()
+        return result
+
     def post_batch(self, fleet_id: str, targets: list[dict[str, Any]]) -> list[dict[str, Any]]:
         r = self.http.post(f"/v1/fleets/{fleet_id}/targets:batch", json={"targets": targets})
         assert r.status_code == 200, r.text

@@ -415,3 +415,41 @@ def test_vehicle_states_dispatch_lines_and_service_levels_are_drawn(
     levels = dash.page.locator("#chart-levels polyline.series")
     assert levels.count() == 3  # one line per threshold
     assert dash.problems() == CLEAN
+
+
+def test_posts_are_drawn_where_the_service_says_the_free_vehicles_should_wait(
+    shared_server: LiveServer, api: ServiceClient, fleet_id: str, open_dashboard: OpenDashboard
+) -> None:
+    api.create_fleet(fleet_id, ["A", "A", "A", "A"], rule="paper")
+    dash = open_dashboard(shared_server).open(fleet_id)
+    first = api.posts(fleet_id)
+    dash.page.wait_for_selector(
+        f"#layer-posts[data-version='{first['version']}']", state="attached", timeout=LOAD_MS
+    )
+    assert dash.page.locator("#layer-posts circle.post").count() == 4
+    busy = api.post_target(fleet_id, edge_position(api, 4))["dispatch"]["vehicles"][0]["vehicle"]
+    api.set_state(fleet_id, busy, {"status": "busy", "position": edge_position(api, 11)})
+    answer = api.posts(fleet_id)
+    dash.page.wait_for_selector(
+        f"#layer-posts[data-version='{answer['version']}']", state="attached", timeout=LOAD_MS
+    )
+    dash.screenshot("posts")
+
+    drawn = dash.page.eval_on_selector_all(
+        "#layer-posts circle.post",
+        """rings => rings.map(r => [r.dataset.vehicle, r.dataset.referenceOf,
+            Number(r.dataset.x), Number(r.dataset.y)])""",
+    )
+    expected = [
+        [p["vehicle"], p["reference_of"], p["position"]["x"], p["position"]["y"]]
+        for p in answer["posts"]
+    ]
+    assert sorted(drawn) == sorted(expected)
+    assert len(drawn) == 3 and busy not in {row[0] for row in drawn}
+    # a dashed line from each vehicle not yet at its post, none from the others
+    away = sorted(p["vehicle"] for p in answer["posts"] if p["time"] > 0)
+    lines = dash.page.eval_on_selector_all(
+        "#layer-posts line.post-line", "lines => lines.map(l => l.dataset.vehicle)"
+    )
+    assert sorted(lines) == away
+    assert dash.problems() == CLEAN

@@ -82,6 +82,11 @@ export class Api {
     return this.get(`/v1/fleets/${encodeURIComponent(fleetId)}/events?after=${after}&limit=${limit}`);
   }
 
+  /** Where each available vehicle should wait now (GET .../posts; changes nothing). */
+  posts(fleetId) {
+    return this.get(`/v1/fleets/${encodeURIComponent(fleetId)}/posts`);
+  }
+
   postTarget(fleetId, target) {
     return this.post(`/v1/fleets/${encodeURIComponent(fleetId)}/targets`, target);
   }

@@ -12,7 +12,10 @@
  * <rect class="reference" data-vehicle=ID> and the tie a <line class="anchor">.
  * Every target is a <g class="target" data-seq data-x data-y data-requires
  * data-served-by data-moved>; a dispatch line is a
- * <line class="dispatch" data-target=SEQ data-vehicle=ID>.
+ * <line class="dispatch" data-target=SEQ data-vehicle=ID>. The posts (where the
+ * available vehicles should wait now, GET .../posts) are
+ * <circle class="post" data-vehicle=ID data-reference-of=ID data-x data-y>, with a
+ * <line class="post-line" data-vehicle=ID> from a vehicle that is away from its post.
  */
 
 import { svgEl, withTitle } from "./svg.js";
@@ -158,6 +161,39 @@ export class FleetLayer {
       const needs = requires ? `needs ${requires.join("+")}` : "any vehicle";
       withTitle(group, `target #${t.seq} (${needs}) · served by ${t.servedBy.join(", ")} · ${t.moved} moved`);
     });
+  }
+
+  /** The posts answer: a ring at each post, a dashed line from a vehicle still on its way. */
+  renderPosts(state, answer) {
+    const layer = this.map.layers.posts;
+    layer.replaceChildren();
+    layer.dataset.version = String(answer.version);
+    for (const post of answer.posts) {
+      const { x, y } = post.position;
+      const vehicle = state.vehicles.get(post.vehicle);
+      if (vehicle && post.time > 0) {
+        svgEl(
+          "line",
+          { class: "post-line", x1: vehicle.cx, y1: -vehicle.cy, x2: x, y2: -y, "data-vehicle": post.vehicle },
+          layer,
+        );
+      }
+      const ring = svgEl(
+        "circle",
+        {
+          class: "post",
+          cx: x,
+          cy: -y,
+          "data-vehicle": post.vehicle,
+          "data-reference-of": post.reference_of,
+          "data-x": x,
+          "data-y": y,
+        },
+        layer,
+      );
+      const whose = post.reference_of === post.vehicle ? "its own reference" : `${post.reference_of}'s reference`;
+      withTitle(ring, `post of ${post.vehicle}: ${whose} · ${post.time.toFixed(1)} ${state.unit} away`);
+    }
   }
 
   /** A dashed ring where a target is being posted, until the answer arrives. */

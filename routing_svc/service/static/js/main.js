@@ -21,6 +21,7 @@ const RECENT_ROWS = 10;
 const CHART_INTERVAL_MS = 300;
 const FLEET_POLL_EMPTY_MS = 3000;
 const FLEET_POLL_MS = 30000;
+const POSTS_DELAY_MS = 500;
 
 const $ = (selector) => document.querySelector(selector);
 const body = document.body;
@@ -62,6 +63,7 @@ const page = {
   chartsDrawnAt: 0,
   chartTimer: 0,
   fleetTimer: 0,
+  postsTimer: 0,
 };
 
 // -- messages -------------------------------------------------------------------
@@ -186,6 +188,7 @@ async function selectFleet(fleetId) {
     showMessage("");
     renderLegend(state);
     renderAll();
+    schedulePosts(state);
     const url = new URL(location.href);
     url.searchParams.set("fleet", fleetId);
     window.history.replaceState(null, "", url);
@@ -211,7 +214,23 @@ function onLog(state, event) {
     showMessage(`Fleet “${state.id}” was deleted.`, { alert: true });
     refreshFleets();
   }
+  if (event.kind === "target" || event.kind === "vehicle_state") schedulePosts(state);
   scheduleRender();
+}
+
+/** Ask for the posts once the stream has been quiet for a moment (a read that changes nothing). */
+function schedulePosts(state) {
+  clearTimeout(page.postsTimer);
+  page.postsTimer = setTimeout(async () => {
+    page.postsTimer = 0;
+    if (state !== page.state || state.deleted) return;
+    try {
+      const answer = await api.posts(state.id);
+      if (state === page.state) layer.renderPosts(state, answer);
+    } catch (error) {
+      if (state === page.state) showMessage(`Could not read the posts: ${error.message}`, { alert: true });
+    }
+  }, POSTS_DELAY_MS);
 }
 
 function onMetrics(state, metrics) {
@@ -292,7 +311,11 @@ function renderLegend(state) {
   const line = document.createElement("span");
   line.className = "swatch line";
   link.append(line, document.createTextNode("served by (dashed: did not move)"));
-  ui.legend.replaceChildren(...items, target, link);
+  const post = document.createElement("li");
+  const ring = document.createElement("span");
+  ring.className = "swatch post";
+  post.append(ring, document.createTextNode("post of a free vehicle (dashed: on its way)"));
+  ui.legend.replaceChildren(...items, target, link, post);
 }
 
 function renderRecent(state) {

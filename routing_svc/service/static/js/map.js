@@ -30,6 +30,7 @@ export class NetworkMap {
       anchors: svg.querySelector("#layer-anchors"),
       links: svg.querySelector("#layer-links"),
       dispatch: svg.querySelector("#layer-dispatch"),
+      posts: svg.querySelector("#layer-posts"),
       targets: svg.querySelector("#layer-targets"),
       vehicles: svg.querySelector("#layer-vehicles"),
       pending: svg.querySelector("#layer-pending"),
