@@ -437,7 +437,7 @@ def test_posts_are_drawn_where_the_service_says_the_free_vehicles_should_wait(
 
     drawn = dash.page.eval_on_selector_all(
         "#layer-posts circle.post",
-        """rings => rings.map(r => [r.dataset.vehicle, r.dataset.referenceOf,
+        """rings => rings.map(r => [r.dataset.postOf, r.dataset.referenceOf,
             Number(r.dataset.x), Number(r.dataset.y)])""",
     )
     expected = [
@@ -449,7 +449,7 @@ def test_posts_are_drawn_where_the_service_says_the_free_vehicles_should_wait(
     # a dashed line from each vehicle not yet at its post, none from the others
     away = sorted(p["vehicle"] for p in answer["posts"] if p["time"] > 0)
     lines = dash.page.eval_on_selector_all(
-        "#layer-posts line.post-line", "lines => lines.map(l => l.dataset.vehicle)"
+        "#layer-posts line.post-line", "lines => lines.map(l => l.dataset.postOf)"
     )
     assert sorted(lines) == away
     assert dash.problems() == CLEAN

@@ -14,8 +14,8 @@
  * data-served-by data-moved>; a dispatch line is a
  * <line class="dispatch" data-target=SEQ data-vehicle=ID>. The posts (where the
  * available vehicles should wait now, GET .../posts) are
- * <circle class="post" data-vehicle=ID data-reference-of=ID data-x data-y>, with a
- * <line class="post-line" data-vehicle=ID> from a vehicle that is away from its post.
+ * <circle class="post" data-post-of=ID data-reference-of=ID data-x data-y>, with a
+ * <line class="post-line" data-post-of=ID> from a vehicle that is away from its post.
  */
 
 import { svgEl, withTitle } from "./svg.js";
@@ -174,7 +174,7 @@ export class FleetLayer {
       if (vehicle && post.time > 0) {
         svgEl(
           "line",
-          { class: "post-line", x1: vehicle.cx, y1: -vehicle.cy, x2: x, y2: -y, "data-vehicle": post.vehicle },
+          { class: "post-line", x1: vehicle.cx, y1: -vehicle.cy, x2: x, y2: -y, "data-post-of": post.vehicle },
           layer,
         );
       }
@@ -184,7 +184,7 @@ export class FleetLayer {
           class: "post",
           cx: x,
           cy: -y,
-          "data-vehicle": post.vehicle,
+          "data-post-of": post.vehicle,
           "data-reference-of": post.reference_of,
           "data-x": x,
           "data-y": y,

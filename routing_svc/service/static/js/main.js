@@ -188,6 +188,8 @@ async function selectFleet(fleetId) {
     showMessage("");
     renderLegend(state);
     renderAll();
+    clearTimeout(page.postsTimer); // a read still due for the fleet shown before
+    page.postsTimer = 0;
     schedulePosts(state);
     const url = new URL(location.href);
     url.searchParams.set("fleet", fleetId);
@@ -218,9 +220,10 @@ function onLog(state, event) {
   scheduleRender();
 }
 
-/** Ask for the posts once the stream has been quiet for a moment (a read that changes nothing). */
+/** Ask for the posts (a read that changes nothing) half a second after the first event
+ * since the last read: at most twice a second however fast the events come. */
 function schedulePosts(state) {
-  clearTimeout(page.postsTimer);
+  if (page.postsTimer) return;
   page.postsTimer = setTimeout(async () => {
     page.postsTimer = 0;
     if (state !== page.state || state.deleted) return;
