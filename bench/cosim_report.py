@@ -632,6 +632,8 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
             flush=True,
         )
+    if not report:
+        parser.error(f"no experiment has finished in {args.workdir}; nothing was written")
     (FIGURES / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
     command = "python bench/cosim_report.py --seeds " + ",".join(map(str, args.seeds))
     for option, value, default in (("--hours", args.hours, 2.0), ("--rate", args.rate, 40.0)):
