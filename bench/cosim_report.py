@@ -339,7 +339,8 @@ summaries: `docs/figures/cosim/report.json`.
     a SUMO run of the background traffic alone, so every policy sees the same incidents.
 - **Policies on identical requests** (same seed, same persons file):
   - `sa`: this product. For each request the co-simulation posts a target to the fleet
-    service (`POST .../targets`): the SA learns from it, and SUMO sends the vehicles named
+    service (`POST .../targets`): the fleet records it (its rule decides when references
+    move, below), and SUMO sends the vehicles named
     in the answer's `dispatch` block (the closest *available* vehicles by their current
     positions and the service's travel times). The co-simulation reports every state
     change SUMO makes to the service (`POST .../vehicles/state:batch`, one batch per
@@ -357,11 +358,15 @@ summaries: `docs/figures/cosim/report.json`.
     reference moves, busy or not), with the {rule} learning rule; the fleet starts at the
     p-median of {history} historical requests.
   - `sa-available`: the same with `learning_vehicles=available` (the closest reference
-    among the available vehicles moves). Under the `consolidating` rule the references
-    move mostly at consolidations (the p-median of a reservoir of recent targets), which
-    do not depend on who is available, and its held steps move rarely: where the two rows
-    are equal, the choice of learning vehicles changed no reference in that run
-    (`--rule paper` compares the two choices under the paper's step alone).
+    among the available vehicles moves). Under the `consolidating` rule a fleet started at
+    the p-median of its history has no consolidation of its own yet, and its held steps
+    wait for the first one, due 250 targets into the epoch
+    (`ConsolidationPolicy.first`, `unfitted_confidence`). At 40 requests an hour (60
+    saturated) for one or two hours no reference moves at all: `sa` and `sa-available`
+    are equal, and `sa` waits where the p-median of its {history} historical requests put it.
+    What separates `sa` from `optimum` (same dispatch, same posts) in this report is that
+    sample, not learning during the run (`--rule paper` compares the two choices under
+    the paper's step alone).
   - `optimum`: the same dispatch, references frozen at the best-known p-median of the
     demand (for incidents: the p-median of {incident_sample} incidents recorded in the same
     traffic as the run, apart from the ones served: an estimate of the incident
