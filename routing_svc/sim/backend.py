@@ -99,7 +99,8 @@ class SimBackend(Protocol):
         ...
 
     def current_edge(self, vehicle: str) -> str:
-        """The (non-internal) edge a vehicle is on or enters next."""
+        """The (non-internal) edge a vehicle is on or enters next (the first of its route
+        while it waits to be inserted)."""
         ...
 
     def lane_position(self, vehicle: str) -> float:
@@ -107,7 +108,8 @@ class SimBackend(Protocol):
         ...
 
     def vehicle_position(self, vehicle: str) -> tuple[str, float]:
-        """``(edge, offset)`` of a vehicle: on a junction, the start of the edge it enters next."""
+        """``(edge, offset)`` of a vehicle: on a junction, or while it waits to be inserted,
+        the start of the edge it enters next."""
         ...
 
     def route_time(self, from_edge: str, to_edge: str, vtype: str) -> float:
@@ -198,7 +200,8 @@ class _ApiBackend:
         if road and not road.startswith(":"):
             return road
         route = self.api.vehicle.getRoute(vehicle)
-        index = int(self.api.vehicle.getRouteIndex(vehicle))
+        # negative while the vehicle waits to be inserted: it enters its first edge next
+        index = max(int(self.api.vehicle.getRouteIndex(vehicle)), -1)
         return str(route[min(index + 1, len(route) - 1)])
 
     def lane_position(self, vehicle: str) -> float:

@@ -105,3 +105,38 @@ def test_unknown_backend_and_unstarted_simulation() -> None:
         make_backend("carla")
     with pytest.raises(SimulationError, match="not been started"):
         LibsumoBackend().step()
+
+
+@pytest.mark.parametrize("kind", ["libsumo", "traci"])
+def test_a_vehicle_waiting_to_be_inserted_is_at_the_start_of_its_first_edge(
+    grid_net: Path, tmp_path: Path, kind: str
+) -> None:
+    """Three vehicles inserted at the same place: SUMO holds back those that do not fit,
+    and where they are is where they will enter (their route index is negative)."""
+    fleet = write_fleet(
+        tmp_path / "fleet.rou.xml",
+        [FleetVehicle(f"fleet00{i}", "B2C2", 100.0) for i in range(3)],
+        lengths={"B2C2": 200.0},
+        park=False,
+    )
+    backend = make_backend(kind)
+    backend.start(
+        sumo_options(
+            net=grid_net,
+            routes=[fleet],
+            end=60,
+            seed=0,
+            tripinfo=tmp_path / "tripinfo.xml",
+            dispatch="traci",
+        )
+    )
+    try:
+        backend.step()
+        inserted = {p[0] for p in backend.vehicle_places()}
+        waiting = sorted({"fleet000", "fleet001", "fleet002"} - inserted)
+        assert waiting, "every vehicle was inserted at once"
+        for vehicle in waiting:
+            assert backend.current_edge(vehicle) == "B2C2"
+            assert backend.vehicle_position(vehicle) == ("B2C2", 0.0)
+    finally:
+        backend.close()
