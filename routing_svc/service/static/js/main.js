@@ -297,28 +297,23 @@ function renderSummary(state) {
     `${state.objective} · ${state.targets} ${state.targets === 1 ? "target" : "targets"}`;
 }
 
+/** One legend entry: a swatch of `className` (and `background`, if given) and a label. */
+function legendItem(className, text, background = "") {
+  const li = document.createElement("li");
+  const swatch = document.createElement("span");
+  swatch.className = className;
+  if (background) swatch.style.background = background;
+  li.append(swatch, document.createTextNode(text));
+  return li;
+}
+
 function renderLegend(state) {
-  const items = state.types.map((type) => {
-    const li = document.createElement("li");
-    const swatch = document.createElement("span");
-    swatch.className = "swatch";
-    swatch.style.background = page.colors.get(type);
-    li.append(swatch, document.createTextNode(`type ${type}`));
-    return li;
-  });
-  const target = document.createElement("li");
-  const mark = document.createElement("span");
-  mark.className = "swatch target";
-  target.append(mark, document.createTextNode("target"));
-  const link = document.createElement("li");
-  const line = document.createElement("span");
-  line.className = "swatch line";
-  link.append(line, document.createTextNode("served by (dashed: did not move)"));
-  const post = document.createElement("li");
-  const ring = document.createElement("span");
-  ring.className = "swatch post";
-  post.append(ring, document.createTextNode("post of a free vehicle (dashed: on its way)"));
-  ui.legend.replaceChildren(...items, target, link, post);
+  ui.legend.replaceChildren(
+    ...state.types.map((type) => legendItem("swatch", `type ${type}`, page.colors.get(type))),
+    legendItem("swatch target", "target"),
+    legendItem("swatch line", "served by (dashed: did not move)"),
+    legendItem("swatch post", "post of a free vehicle (dashed: on its way)"),
+  );
 }
 
 function renderRecent(state) {
