@@ -13,7 +13,9 @@ Examples::
 
 Prints the JSON summary (one entry per policy: SUMO's mean and 90th-percentile
 wait, the fraction within 300/600/900 s, requests served, empty km, requests
-per vehicle-hour, busy fraction, simulation speed); writes it with the inputs,
+per vehicle-hour, busy fraction, simulation speed) and the network's traffic
+lights (``signals``: links the programs SUMO runs never turn green, with a
+warning on standard error if there are any); writes it with the inputs,
 SUMO's outputs and the PNG plots under ``--out``.
 
 With ``--stands FILE.add.xml`` the usable ``parkingArea`` elements of the file

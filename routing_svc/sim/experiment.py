@@ -18,6 +18,7 @@ same traffic).
 from __future__ import annotations
 
 import json
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -83,6 +84,9 @@ class CosimResult:
             for seed, opt in self.optimum.items()
         }
         summary = {"spec": self.spec.to_dict(), "policies": policies, "optimum": optimum}
+        signals = self.prepared.signals if self.prepared is not None else None
+        if signals is not None:
+            summary["signals"] = signals.to_dict()
         reading = self.prepared.stands if self.prepared is not None else None
         if reading is not None:
             summary["stands"] = {
@@ -169,6 +173,9 @@ def run_cosim(
     out_dir = out_dir.resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
     prepared = prepare_seeds(spec, out_dir=out_dir, progress=progress, stands=stands)
+    warning = prepared.signals.warning(spec.network) if prepared.signals is not None else None
+    if warning is not None:
+        print(warning, file=sys.stderr)
     jobs = _jobs(spec, prepared, progress=progress, resume=resume)
     workers = 1 if spec.gui else min(spec.workers, len(jobs))
     runs = process_map(

@@ -33,6 +33,7 @@ import numpy as np
 from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork, RoadSpace, load_network
+from routing_svc.network.signals import SignalAudit, audit_signals
 from routing_svc.network.stands import StandReading, usable_stands
 from routing_svc.sim.backend import make_backend
 from routing_svc.sim.inputs import FleetVehicle, Request, random_trips, sumo_options, write_persons
@@ -178,6 +179,8 @@ class Prepared:
     seeds: list[SeedInputs]
     stands: StandReading | None = None
     """The usable stands of ``spec.stands``, if given."""
+    signals: SignalAudit | None = None
+    """The network's traffic lights as SUMO runs them (links never green)."""
     _sampled: dict[int, DemandDistribution[NetPosition]] = dataclasses.field(
         default_factory=dict, repr=False
     )
@@ -405,7 +408,7 @@ def prepare_seeds(
         sample: dict[int, list[Request]] = {}
     else:
         requests, sample, history = _incidents(spec, net, workdirs, trips, progress=progress)
-    prepared = Prepared(spec, net, network, space, phases, [], stands)
+    prepared = Prepared(spec, net, network, space, phases, [], stands, audit_signals(net, network))
     shared: Optimum | None = None
     if phases is not None:
         shared = prepared.optimum_for(mixed_demand(phases, end=stop))

@@ -29,12 +29,41 @@ def test_cosim_command_prints_a_summary_and_writes_plots(
         ]
     )  # fmt: skip
     assert args.run(args) == 0
-    printed = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    printed = json.loads(captured.out)
     assert set(printed["policies"]) == {"sa", "sumo-stop"}
+    assert printed["signals"]["signals"] == 0  # the grid has no traffic lights
+    assert "never turn green" not in captured.err
     assert printed["policies"]["sa"]["served"] >= 1
     assert json.loads((out / "summary.json").read_text())["policies"].keys() == {"sa", "sumo-stop"}
     for name in ("waits", "positions", "objective"):
         assert (out / f"cosim-{name}.png").stat().st_size > 1000
+
+
+def test_cosim_command_warns_of_lights_that_never_turn_green(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from routing_svc.network import load_network
+    from routing_svc.network.catalogue import resolve_network
+    from routing_svc.network.signals import audit_signals
+
+    out = tmp_path / "out"
+    args = _parse(
+        [
+            "--net", "bs3d", "--vehicles", "3", "--duration", "600", "--warmup", "60",
+            "--drain", "240", "--rate", "60", "--density", "3", "--policies", "sumo-stop",
+            "--seeds", "0", "--workers", "1", "--out", str(out), "--quiet",
+        ]
+    )  # fmt: skip
+    assert args.run(args) == 0
+    captured = capsys.readouterr()
+    net = resolve_network("bs3d")
+    audit = audit_signals(net, load_network(net))
+    assert audit.never_green  # the game's light is made to be switched by hand
+    assert json.loads(captured.out)["signals"] == audit.to_dict()
+    assert json.loads((out / "summary.json").read_text())["signals"] == audit.to_dict()
+    assert f"{len(audit.never_green)} of the {audit.links} signalled links of bs3d" in captured.err
+    assert "--tls.rebuild" in captured.err
 
 
 def test_cosim_command_rejects_unknown_policies(grid_net: Path, tmp_path: Path) -> None:
