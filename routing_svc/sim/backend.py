@@ -46,6 +46,9 @@ PARK_SECONDS = 1e7
 #: Deceleration (m/s^2) assumed to decide whether a stop ahead can still be reached.
 BRAKING = 4.5
 
+#: A vehicle parked within this distance (m) of the place it is sent to is already there.
+PARKED_TOLERANCE = 1.0
+
 
 class SimulationError(RoutingSvcError):
     """SUMO refused an operation or could not start."""
@@ -117,7 +120,8 @@ class SimBackend(Protocol):
         ...
 
     def park_at(self, vehicle: str, edge: str, offset: float) -> None:
-        """Drive ``vehicle`` to ``(edge, offset)`` and park there until dispatched.
+        """Drive ``vehicle`` to ``(edge, offset)`` and park there until dispatched;
+        nothing if it is parked there already.
 
         Raises ``SimulationError`` when SUMO cannot do it now (e.g. the vehicle
         is on a junction); the caller tries again a step later.
@@ -125,7 +129,8 @@ class SimBackend(Protocol):
         ...
 
     def park_in(self, vehicle: str, area: str) -> None:
-        """Drive ``vehicle`` to SUMO parkingArea ``area`` and park in it until dispatched.
+        """Drive ``vehicle`` to SUMO parkingArea ``area`` and park in it until dispatched;
+        nothing if it is parked in it already.
 
         Raises ``SimulationError`` as :meth:`park_at` does.
         """
@@ -221,6 +226,14 @@ class _ApiBackend:
         return float(route.travelTime) if route.edges else math.inf
 
     def park_at(self, vehicle: str, edge: str, offset: float) -> None:
+        current = self._parked(vehicle)
+        if (
+            current is not None
+            and current.lane.rpartition("_")[0] == edge
+            and abs(float(current.endPos) - offset) <= PARKED_TOLERANCE
+        ):
+            return
+
         def stop() -> None:
             self.api.vehicle.setStop(
                 vehicle,
@@ -234,6 +247,9 @@ class _ApiBackend:
         self._park(vehicle, edge, offset, stop, f"{edge}@{offset:.1f}")
 
     def park_in(self, vehicle: str, area: str) -> None:
+        current = self._parked(vehicle)
+        if current is not None and current.stoppingPlaceID == area:
+            return
         try:
             lane = str(self.api.parkingarea.getLaneID(area))
             start = float(self.api.parkingarea.getStartPos(area))
@@ -245,6 +261,21 @@ class _ApiBackend:
             self.api.vehicle.setParkingAreaStop(vehicle, area, PARK_SECONDS)
 
         self._park(vehicle, edge, start, stop, f"parkingArea {area}")
+
+    def _parked(self, vehicle: str) -> Any:
+        """The parking stop (of :data:`PARK_SECONDS`) ``vehicle`` is making now, as SUMO's
+        stop data, or ``None`` (it drives, or makes another stop such as a drop-off).
+
+        Parking it again where it stands would not be a no-op: the new stop would
+        replace the current one, which ``resume`` then ends, and the vehicle would
+        drive off to the end of its route and leave the simulation.
+        """
+        vehicle_api = self.api.vehicle
+        if not vehicle_api.isStopped(vehicle):
+            return None
+        stops = vehicle_api.getStops(vehicle, 1)
+        # SUMO reports the duration left; no other stop lasts half as long
+        return stops[0] if stops and float(stops[0].duration) > PARK_SECONDS / 2 else None
 
     def _park(self, vehicle: str, edge: str, offset: float, stop: Any, where: str) -> None:
         """Route ``vehicle`` to ``(edge, offset)`` and add the parking ``stop`` there."""

@@ -7,17 +7,30 @@ from pathlib import Path
 import pytest
 
 from routing_svc.sim.backend import (
+    TAXI_GONE,
     LibsumoBackend,
     Reservation,
     SimBackend,
     SimulationError,
     make_backend,
 )
-from routing_svc.sim.inputs import FleetVehicle, Request, sumo_options, write_fleet, write_persons
+from routing_svc.sim.inputs import (
+    FleetVehicle,
+    Request,
+    sumo_options,
+    write_fleet,
+    write_persons,
+    write_taxi_stands,
+)
 
 
 def _start(
-    grid_net: Path, tmp_path: Path, *, requests: list[Request], kind: str = "libsumo"
+    grid_net: Path,
+    tmp_path: Path,
+    *,
+    requests: list[Request],
+    kind: str = "libsumo",
+    additional: tuple[Path, ...] = (),
 ) -> SimBackend:
     fleet = write_fleet(
         tmp_path / "fleet.rou.xml",
@@ -35,6 +48,7 @@ def _start(
             seed=0,
             tripinfo=tmp_path / "tripinfo.xml",
             dispatch="traci",
+            additional=additional,
         )
     )
     return backend
@@ -83,6 +97,48 @@ def test_parking_behind_the_vehicle_on_its_own_edge_drives_a_loop(
         assert len(seen) >= 2  # it left the edge (a U-turn at C2 is allowed) and came back
         assert backend.current_edge("fleet000") == "B2C2"
         assert backend.lane_position("fleet000") == pytest.approx(20.0, abs=1.0)
+    finally:
+        backend.close()
+
+
+def _parked_near(backend: SimBackend, vehicle: str, edge: str, offset: float) -> bool:
+    here, position = backend.vehicle_position(vehicle)
+    return here == edge and abs(position - offset) <= 1.0
+
+
+@pytest.mark.parametrize("kind", ["libsumo", "traci"])
+def test_a_vehicle_sent_where_it_is_parked_stays_parked(
+    grid_net: Path, tmp_path: Path, kind: str
+) -> None:
+    # SUMO would take the new stop for the current one, end it on resume, and the
+    # vehicle would drive to the end of its route and leave the simulation
+    stands = write_taxi_stands(
+        tmp_path / "stands.add.xml",
+        [FleetVehicle("stand", "C2D2", 100.0)],
+        lengths={"C2D2": 200.0},
+        lanes={},
+        capacity=2,
+    )
+    backend = _start(grid_net, tmp_path, requests=[], kind=kind, additional=(stands,))
+    try:
+        for _ in range(30):
+            backend.step()
+        assert _parked_near(backend, "fleet000", "B2C2", 100.0)
+        backend.park_at("fleet000", "B2C2", 100.0)  # where it was parked from the start
+        for _ in range(600):
+            backend.step()
+        assert backend.taxi_state("fleet000") != TAXI_GONE
+        assert _parked_near(backend, "fleet000", "B2C2", 100.0)
+        (area,) = backend.api.parkingarea.getIDList()  # type: ignore[attr-defined]
+        backend.park_in("fleet000", area)
+        for _ in range(600):
+            backend.step()
+        assert backend.parked_in(area) == ["fleet000"]
+        backend.park_in("fleet000", area)
+        for _ in range(600):
+            backend.step()
+        assert backend.taxi_state("fleet000") != TAXI_GONE
+        assert backend.parked_in(area) == ["fleet000"]
     finally:
         backend.close()
 
