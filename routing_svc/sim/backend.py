@@ -93,7 +93,10 @@ class SimBackend(Protocol):
         ...
 
     def dispatch(self, vehicle: str, reservation: str) -> None:
-        """Send taxi ``vehicle`` to serve ``reservation``."""
+        """Send taxi ``vehicle`` to serve ``reservation``.
+
+        Raises ``SimulationError`` when SUMO refuses, or accepts without the pickup.
+        """
         ...
 
     def taxi_state(self, vehicle: str) -> int:
@@ -187,10 +190,25 @@ class _ApiBackend:
         return sorted(found, key=lambda r: (r.time, r.person))
 
     def dispatch(self, vehicle: str, reservation: str) -> None:
+        vehicle_api = self.api.vehicle
         try:
-            self.api.vehicle.dispatchTaxi(vehicle, [reservation])
+            vehicle_api.dispatchTaxi(vehicle, [reservation])
+            if not self._picks_up(vehicle, reservation) and vehicle_api.isStopped(vehicle):
+                # SUMO drops a pickup a hair behind the stop the taxi is making and keeps
+                # the drop-off (the taxi would leave without its customer); once that
+                # stop has ended, it takes the pickup
+                vehicle_api.resume(vehicle)
+                vehicle_api.dispatchTaxi(vehicle, [reservation])
         except self._error as exc:
             raise SimulationError(f"dispatch of {vehicle} to {reservation}: {exc}") from None
+        if not self._picks_up(vehicle, reservation):
+            raise SimulationError(f"SUMO sent {vehicle} for {reservation} without its pickup")
+
+    def _picks_up(self, vehicle: str, reservation: str) -> bool:
+        """Whether one of ``vehicle``'s stops ahead picks up the customer of ``reservation``
+        (SUMO's ``actType`` ``"pickup <person> (<reservation>)"``)."""
+        acts = [str(stop.actType) for stop in self.api.vehicle.getStops(vehicle)]
+        return any(a.startswith("pickup") and a.endswith(f"({reservation})") for a in acts)
 
     def taxi_state(self, vehicle: str) -> int:
         try:

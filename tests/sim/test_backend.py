@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from routing_svc.network.catalogue import resolve_network
 from routing_svc.sim.backend import (
     TAXI_GONE,
     LibsumoBackend,
@@ -139,6 +140,55 @@ def test_a_vehicle_sent_where_it_is_parked_stays_parked(
             backend.step()
         assert backend.taxi_state("fleet000") != TAXI_GONE
         assert backend.parked_in(area) == ["fleet000"]
+    finally:
+        backend.close()
+
+
+@pytest.mark.parametrize("kind", ["libsumo", "traci"])
+@pytest.mark.parametrize("behind", [0.01, 1.0])
+def test_a_parked_taxi_picks_up_a_customer_just_behind_it(
+    tmp_path: Path, kind: str, behind: float
+) -> None:
+    # On this edge of bs3d SUMO drops a pickup 1 cm behind the taxi's parking stop and
+    # keeps the drop-off: the taxi would drive off without its customer. 1 m behind, it
+    # takes the pickup and drives round the block.
+    net = resolve_network("bs3d")
+    edge, parked = "-33049407#2", 20.0
+    fleet = write_fleet(
+        tmp_path / "fleet.rou.xml",
+        [FleetVehicle("fleet000", "33049438#0", 10.0)],
+        lengths={"33049438#0": 100.0},
+        park=False,
+    )
+    request = Request("p0", 400.0, edge, parked - behind, "108892340#1", 30.0)
+    persons = write_persons(tmp_path / "persons.rou.xml", [request])
+    backend = make_backend(kind)
+    backend.start(
+        sumo_options(
+            net=net,
+            routes=[fleet, persons],
+            end=1500,
+            seed=0,
+            tripinfo=tmp_path / "tripinfo.xml",
+            dispatch="traci",
+        )
+    )
+    try:
+        backend.step()
+        backend.park_at("fleet000", edge, parked)
+        found: list[Reservation] = []
+        while not found:
+            backend.step()
+            found = backend.new_reservations()
+        assert _parked_near(backend, "fleet000", edge, parked)
+        backend.dispatch("fleet000", found[0].id)
+        carried = False
+        for _ in range(600):
+            backend.step()
+            carried = carried or "p0" in backend.api.vehicle.getPersonIDList("fleet000")  # type: ignore[attr-defined]
+        assert carried
+        assert backend.taxi_state("fleet000") == 0  # delivered, idle, still in the simulation
+        assert "p0" not in backend.api.person.getIDList()  # type: ignore[attr-defined]
     finally:
         backend.close()
 
