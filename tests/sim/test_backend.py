@@ -25,6 +25,10 @@ from routing_svc.sim.inputs import (
 )
 
 
+GRID_VEHICLE = FleetVehicle("fleet000", "B2C2", 100.0)
+"""The fleet vehicle of these tests on the grid."""
+
+
 def _start(
     grid_net: Path,
     tmp_path: Path,
@@ -32,12 +36,18 @@ def _start(
     requests: list[Request],
     kind: str = "libsumo",
     additional: tuple[Path, ...] = (),
+    vehicle: FleetVehicle = GRID_VEHICLE,
+    length: float = 200.0,
+    park: bool = True,
 ) -> SimBackend:
+    """SUMO on ``grid_net`` (or another network) with one fleet vehicle on an edge of
+    ``length`` metres, parked at the start unless ``park`` is false, and the persons of
+    ``requests``."""
     fleet = write_fleet(
         tmp_path / "fleet.rou.xml",
-        [FleetVehicle("fleet000", "B2C2", 100.0)],
-        lengths={"B2C2": 200.0},
-        park=True,
+        [vehicle],
+        lengths={vehicle.edge: length},
+        park=park,
     )
     persons = write_persons(tmp_path / "persons.rou.xml", requests)
     backend = make_backend(kind)
@@ -152,26 +162,16 @@ def test_a_parked_taxi_picks_up_a_customer_just_behind_it(
     # On this edge of bs3d SUMO drops a pickup 1 cm behind the taxi's parking stop and
     # keeps the drop-off: the taxi would drive off without its customer. 1 m behind, it
     # takes the pickup and drives round the block.
-    net = resolve_network("bs3d")
     edge, parked = "-33049407#2", 20.0
-    fleet = write_fleet(
-        tmp_path / "fleet.rou.xml",
-        [FleetVehicle("fleet000", "33049438#0", 10.0)],
-        lengths={"33049438#0": 100.0},
-        park=False,
-    )
     request = Request("p0", 400.0, edge, parked - behind, "108892340#1", 30.0)
-    persons = write_persons(tmp_path / "persons.rou.xml", [request])
-    backend = make_backend(kind)
-    backend.start(
-        sumo_options(
-            net=net,
-            routes=[fleet, persons],
-            end=1500,
-            seed=0,
-            tripinfo=tmp_path / "tripinfo.xml",
-            dispatch="traci",
-        )
+    backend = _start(
+        resolve_network("bs3d"),
+        tmp_path,
+        requests=[request],
+        kind=kind,
+        vehicle=FleetVehicle("fleet000", "33049438#0", 10.0),
+        length=114.96,
+        park=False,
     )
     try:
         backend.step()
