@@ -24,7 +24,6 @@ from routing_svc.sim.inputs import (
     write_taxi_stands,
 )
 
-
 GRID_VEHICLE = FleetVehicle("fleet000", "B2C2", 100.0)
 """The fleet vehicle of these tests on the grid."""
 
