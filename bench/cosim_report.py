@@ -479,10 +479,11 @@ routing-svc cosim --net NET --mode MODE --vehicles N --hours 1 --rate 40 --densi
 Ratios: mean / `sumo-stop` (goal 0.8), p90 / `sumo-stop` (0.8), mean / `optimum` (1.05);
 missed in bold; 0 where `sumo-stop`'s p90 is infinite. Means are over the served requests.
 `bs3d`: as SUMO ships it; `bs3d rebuilt`: its traffic-light programs rebuilt (below).
-(*) Measured before the two fixes below, not run again.
+(*) Measured on `6fbbb96`, before the co-simulation fixes of `CHANGELOG.md`; not
+run again.
 
-- **Bologna and the OSM import.** `sa` meets 10 of the 15 checks. The four experiments run
-  again after the fixes below gave the same figures to the second. A p90 is infinite when
+- **Bologna and the OSM import.** `sa` meets 10 of the 15 checks. The other four gave the
+  same figures on `6fbbb96` to the second. A p90 is infinite when
   a request of a seed was never served: on the imported network SUMO's background traffic
   jams (93 of 1,858 background vehicles of one run waited more than 1,000 s), and a taxi
   sent through such a jam does not reach its customer before the run ends. A dispatch is
@@ -509,14 +510,6 @@ missed in bold; 0 where `sumo-stop`'s p90 is infinite. Means are over the served
   netconvert -s "$(python -c 'import sumo; print(sumo.SUMO_HOME)')/tools/game/bs3d/bs.net.xml" \\
       --tls.rebuild -o bs3d_signals.net.xml.gz
   ```
-- **Two co-simulation defects, mended in this version**, lost vehicles here. A taxi sent
-  for a customer about 1 cm behind the place where it was parked left without them (SUMO
-  dropped the pickup and kept the drop-off), drove to the drop-off and left the simulation
-  at the end of its route; every taxi sent for that customer after it did the same. And a
-  vehicle sent to the place where it was already parked left the simulation too. One run
-  of `bs3d` with rebuilt signals (persons, 10 vehicles, seed 2) lost 4 of its 10 vehicles;
-  the figures above have none lost there. On Bologna and the OSM import the figures did
-  not change.
 """
 
 
