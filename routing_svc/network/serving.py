@@ -47,7 +47,7 @@ from routing_svc.network.search import (
 )
 from routing_svc.network.twins import set_twins
 from routing_svc.network.walking import walk_spend
-from routing_svc.sa.space import Served
+from routing_svc.sa.space import Assignment, Served
 from routing_svc.sa.step_rule import probe_gains, probe_step, step_amount
 from routing_svc.types import FloatArray, Int32Array, IntArray, NetPosition
 
@@ -441,6 +441,35 @@ class FleetUpdate:
         return Served(
             mover, completion, mover_cost, amount, old, positions[mover], tuple(backed_off)
         )
+
+    def search(
+        self, target: NetPosition, positions: list[NetPosition], entries: list[NetPosition | None]
+    ) -> Assignment[NetPosition] | None:
+        """The fleet's search for ``target`` alone, with the kept columns:
+        :meth:`RoadSpace.assign` for any one vehicle, nothing moved.
+
+        ``None``: the search reported an error (the caller's own path then raises it).
+
+        Raises
+        ------
+        InvalidInput
+            If the target or a position is not on the network.
+        """
+        check_position(self.network, target, what="target")
+        self._sync(positions, entries)
+        arc_indptr, arcs, edge_class, _, length, _, rate, _ = self._road
+        dist, pred, touched, heap_key, heap_node, head, nxt = self._work
+        status, _, slot, route, times, costs, idx = nearest_vehicles(
+            arc_indptr, arcs, edge_class, length, rate, target.edge, target.offset,
+            self._veh_edge, self._veh_offset, self._speed, self._anyone, self._one,
+            dist, pred, touched, heap_key, heap_node, head, nxt, self._n, np.inf,
+        )  # fmt: skip
+        if status != STATUS_OK:
+            return None
+        route.flags.writeable = False
+        mover = int(idx[slot])
+        time = float(times[slot])
+        return Assignment((mover,), (time,), mover, time, float(costs[slot]), route)
 
     def _entry(self, i: int) -> NetPosition | None:
         edge = int(self._entry_edge[i])

@@ -67,7 +67,14 @@ from routing_svc.sa.objectives import Objective
 from routing_svc.sa.posts import Post, fleet_posts
 from routing_svc.sa.requirements import build_requirement
 from routing_svc.sa.schedules import Counting, Schedule, schedule_from_dict
-from routing_svc.sa.space import DirectedSpace, P, Requirement, SingleTargetServing, Space
+from routing_svc.sa.space import (
+    Assignment,
+    DirectedSpace,
+    P,
+    Requirement,
+    SingleTargetServing,
+    Space,
+)
 from routing_svc.sa.stands import StandSet, vehicle_stands
 from routing_svc.sa.step_rule import probe_gains, probe_step
 
@@ -429,6 +436,14 @@ class Fleet(Generic[P]):
 
     def _search(self, target: P, requires: Sequence[str] | None) -> tuple[Dispatch[P], Any]:
         """One search for both answers: who goes now and whose reference moves."""
+        if not requires and self.at_rest():
+            found = self._compiled_search(target)
+            if found is not None:  # any one vehicle: the mover goes
+                moved = self._ids[found.mover]
+                time = found.completion_time
+                sent = Sent((moved,), ("*",), (time,))
+                cost = self.config.objective.cost(time)
+                return Dispatch((moved,), (time,), moved, time, cost, sent), found
         if requires:
             requirement, names = build_requirement(self._types, requires)
         else:
@@ -824,6 +839,15 @@ class Fleet(Generic[P]):
             serving = make(self._speeds, window if probing else 0.0)
         self._compiled = (space, self.config, serving)
         return serving
+
+    def _compiled_search(self, target: P) -> Assignment[P] | None:
+        """:meth:`Space.assign` for any one vehicle through the space's compiled update's
+        kept columns (:meth:`SingleTargetServing.search`); ``None`` without one, or when
+        its search reports an error (the space's own path then raises it)."""
+        serving = self._serving()
+        if serving is None:
+            return None
+        return serving.search(target, self.state.positions, self.state.entries)
 
     def _observe_compiled(self, serving: SingleTargetServing[P], target: P) -> Outcome[P] | None:
         """:meth:`observe` through the space's compiled update; ``None`` if it declined."""

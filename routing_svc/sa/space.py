@@ -220,3 +220,10 @@ class SingleTargetServing(Protocol[P]):
         fleet's own path raises it.
         """
         ...
+
+    def search(
+        self, target: P, positions: list[P], entries: list[P | None]
+    ) -> Assignment[P] | None:
+        """:meth:`Space.assign` of ``target`` (checked) for any one vehicle at ``positions``,
+        equal to it, moving nothing; ``None`` when the search reports an error."""
+        ...

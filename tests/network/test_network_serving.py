@@ -21,7 +21,8 @@ import pytest
 from routing_svc.errors import Unreachable
 from routing_svc.network import RoadSpace
 from routing_svc.network.costs import CostKind
-from routing_svc.sa import Fleet, FleetConfig, Vehicle
+from routing_svc.sa import Fleet, FleetConfig, Vehicle, learning_config
+from routing_svc.sa.consolidation import ConsolidationPolicy
 from routing_svc.sa.fleet import Outcome
 from routing_svc.sa.objectives import Objective
 from routing_svc.sa.schedules import Constant, Counting, InverseScaling
@@ -210,3 +211,61 @@ def test_constant_steps_and_a_hand_set_entry(drt_case: NetCase) -> None:
             continue
         _assert_same(fleet.observe(target), expected)
         _assert_same_state(fleet, reference)
+
+
+@pytest.mark.parametrize("either_way", [True, False], ids=["twins", "directed"])
+def test_held_steps_search_through_the_kept_columns(case: NetCase, either_way: bool) -> None:
+    """The ``consolidating`` rule's search (:meth:`FleetUpdate.search`, the fleet's kept
+    columns) finds what :meth:`RoadSpace.assign` finds, whatever moved the references:
+    held steps, consolidations, a target with a requirement, a restored snapshot, a
+    reference set from outside."""
+    n = 10
+    space = RoadSpace(case.network, either_way=either_way)
+    config = learning_config(
+        "consolidating",
+        typical_cost=space.typical_cost(),
+        n_vehicles=n,
+        objective=Objective(1.0),
+        step_scale=0.5,
+        consolidation=ConsolidationPolicy(unfitted_confidence=0.0, checked_moves=False),
+    )  # held steps that move whenever their pressure asks
+    rng = np.random.default_rng(11)
+    vehicles = [(Vehicle(f"v{i:02d}"), p) for i, p in enumerate(case.random_positions(rng, n))]
+    fleet = Fleet.create(space, vehicles, config)
+    reference = Fleet.create(_methods_only(space), vehicles, config)
+    counts = {"moved": 0, "consolidated": 0, "other": 0}
+    for k in range(1200):
+        target = _targets(case, rng, reference)
+        try:
+            expected = reference.observe(target)
+        except Unreachable:
+            with pytest.raises(Unreachable):
+                fleet.observe(target)
+            continue
+        got = fleet.observe(target)
+        _assert_same(got, expected)
+        _assert_same_state(fleet, reference)
+        assert fleet.assign(target) == reference.assign(target)
+        counts["moved"] += got.moved_by > 0.0
+        counts["consolidated"] += got.consolidation is not None
+        if k % 89 == 0:
+            counts["other"] += 1
+            kind = rng.integers(3)
+            if kind == 0:
+                target = _targets(case, rng, reference)
+                try:
+                    expected = reference.observe(target, ["default"])
+                except Unreachable:
+                    continue
+                _assert_same(fleet.observe(target, ["default"]), expected)
+            elif kind == 1:
+                data: dict[str, Any] = reference.snapshot()
+                fleet.restore(data)
+                reference.restore(data)
+            else:
+                i = int(rng.integers(n))
+                (moved,) = case.random_positions(rng, 1)
+                fleet.state.positions[i] = moved
+                reference.state.positions[i] = moved
+            _assert_same_state(fleet, reference)
+    assert counts["moved"] > 20 and counts["consolidated"] >= 3 and counts["other"] > 10, counts
