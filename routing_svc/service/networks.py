@@ -22,6 +22,10 @@ SNAP_DISTANCE_M = 500.0
 """Coordinates farther than this from every usable edge are off the network."""
 
 
+DESCRIBED_PLACES = 65_536
+"""Descriptions a network keeps (:meth:`NetworkEntry.describe`)."""
+
+
 @dataclass
 class NetworkEntry:
     """One loaded network with its spaces (one per cost kind) and snapper."""
@@ -33,6 +37,7 @@ class NetworkEntry:
     snapper: Snapper
     _spaces: dict[str, RoadSpace] = field(default_factory=dict)
     _geometry: dict[str, Any] | None = None
+    _described: dict[NetPosition, dict[str, Any]] = field(default_factory=dict)
 
     def space(self, cost: str) -> RoadSpace:
         """The free-flow space for ``cost`` (``length`` or ``time``), built once."""
@@ -77,7 +82,20 @@ class NetworkEntry:
         raise InvalidInput("unknown position form")
 
     def describe(self, position: NetPosition) -> dict[str, Any]:
-        """``edge, offset, x, y`` (and ``lon, lat`` where the network has a projection)."""
+        """``edge, offset, x, y`` (and ``lon, lat`` where the network has a projection).
+
+        A fleet's answers describe the same few places again and again (its
+        references, the places its calls come from), so the last
+        :data:`DESCRIBED_PLACES` descriptions are kept; each answer gets its own copy.
+        """
+        kept = self._described.get(position)
+        if kept is None:
+            if len(self._described) >= DESCRIBED_PLACES:
+                self._described.clear()
+            kept = self._described[position] = self._description(position)
+        return dict(kept)
+
+    def _description(self, position: NetPosition) -> dict[str, Any]:
         space = self.space("length")
         x, y = space.xy(position)
         out: dict[str, Any] = {
