@@ -145,7 +145,7 @@ class ConsolidationPolicy:
 
     reservoir: int = 4000
     first: int = 250
-    growth: float = 1.25
+    growth: float = 1.1
     longest: int = 4000
     slowest: int = 32000
     folds: int = 4
@@ -155,7 +155,7 @@ class ConsolidationPolicy:
     block: int = 250
     shift_ratio: float = 1.25
     shift_confidence: float = 2.0
-    refit: float | None = 1.5
+    refit: float | None = 1.1
     fresh_baseline: bool = True
     checked_moves: bool = True
     shakes: int = 20
@@ -252,8 +252,10 @@ class ConsolidationPolicy:
         return cls(**{**legacy, **same, **data})
 
     def _growth_of(self, targets: int) -> int:
-        """``growth - 1`` times ``targets``, rounded up: a clock's uncapped period."""
-        return math.ceil(targets * (self.growth - 1.0))
+        """``growth - 1`` times ``targets``, rounded up: a clock's uncapped period (a
+        product within rounding error of an integer is that integer: ``1.1 - 1`` is not
+        exactly a tenth)."""
+        return math.ceil(round(targets * (self.growth - 1.0), 9))
 
     def next_after(self, *, now: int, epoch: int, accepted_at: int) -> int:
         """The target count of the next consolidation after one at ``now``, in an epoch

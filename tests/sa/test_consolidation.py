@@ -10,6 +10,7 @@ import json
 import math
 import statistics
 from collections.abc import Callable, Mapping, Sequence
+from fractions import Fraction
 from typing import Any
 
 import numpy as np
@@ -793,7 +794,7 @@ def schedule(policy: ConsolidationPolicy, *, start: int, epoch: int, until: int)
     due, out = start, []
     while due <= until:
         out.append(due)
-        period = math.ceil((due - epoch) * (policy.growth - 1.0))
+        period = math.ceil((due - epoch) * (Fraction(str(policy.growth)) - 1))  # exact decimal
         due += min(max(period, policy.first), policy.longest)
     return out
 
@@ -827,12 +828,12 @@ def test_policy_defaults() -> None:
     # the values docs/learning.md states
     assert (policy.reservoir, policy.first, policy.longest, policy.block) == (4000, 250, 4000, 250)
     assert (policy.growth, policy.folds, policy.confidence, policy.shift_ratio) == (
-        1.25,
+        1.1,
         4,
         0.0,
         1.25,
     )
-    assert (policy.refit, policy.fresh_baseline, policy.checked_moves) == (1.5, True, True)
+    assert (policy.refit, policy.fresh_baseline, policy.checked_moves) == (1.1, True, True)
     assert (policy.shakes, policy.slowest, policy.settled_confidence) == (20, 32_000, 1.0)
     assert (policy.shift_confidence, policy.unfitted_confidence) == (2.0, 3.0)
 
@@ -852,13 +853,13 @@ def test_consolidations_happen_on_the_schedule(calm_run: Run) -> None:
     _, fleet, outcomes = calm_run
     assert fleet.config.rule is Rule.CONSOLIDATING
     done = [o.index + 1 for o in outcomes if o.consolidation is not None]
-    # periods of a quarter of the epoch's targets, at least 250: 188 -> 250, 313, 391, 489
-    assert done == [250, 500, 750, 1000, 1250, 1563, 1954, 2443]
+    # periods of a tenth of the epoch's targets, at least 250 (a tenth of 2,750: 275)
+    assert done == [250 * i for i in range(1, 12)]
     assert done == schedule(CALM, start=CALM.first, epoch=0, until=3000)
     assert any(o.consolidation.accepted for o in outcomes if o.consolidation is not None)
     learning = fleet.state.learning
     assert learning is not None and learning.epoch == 0
-    assert learning.next_consolidation == 3054  # 2443 + 611
+    assert learning.next_consolidation == 3025  # 2750 + 275
     assert len(learning.reservoir) == 3000
     last = max(o.index + 1 for o in outcomes if o.consolidation and o.consolidation.accepted)
     assert learning.accepted_at == last
@@ -868,7 +869,7 @@ def test_a_fleet_whose_consolidations_are_turned_down_consolidates_more_rarely(
     space: RoadSpace,
 ) -> None:
     policy = ConsolidationPolicy(
-        reservoir=400, first=50, longest=100, slowest=800, block=50, shift_ratio=1e9
+        reservoir=400, first=50, growth=1.25, longest=100, slowest=800, block=50, shift_ratio=1e9
     )
     _, stream = demand_stream(3, 6000)
     fleet = consolidating_fleet(space, policy=policy)
@@ -895,6 +896,7 @@ def test_a_settled_demand_asks_more_of_a_consolidation(
     policy = ConsolidationPolicy(
         reservoir=400,
         first=50,
+        growth=1.25,
         longest=100,
         block=50,
         shift_ratio=1e9,
@@ -926,7 +928,13 @@ def test_references_no_consolidation_fitted_ask_more_and_hold_still(
     space: RoadSpace, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     policy = ConsolidationPolicy(
-        reservoir=400, first=50, longest=100, block=50, shift_ratio=1e9, unfitted_confidence=2.5
+        reservoir=400,
+        first=50,
+        growth=1.25,
+        longest=100,
+        block=50,
+        shift_ratio=1e9,
+        unfitted_confidence=2.5,
     )
     # by hand: the larger of the epoch's confidence and the unfitted one, until a fit
     assert policy.confidence_at(due=396, epoch=0, fitted=False) == 2.5
@@ -934,7 +942,7 @@ def test_references_no_consolidation_fitted_ask_more_and_hold_still(
     assert policy.confidence_at(due=400, epoch=0, fitted=False) == 2.5  # settled: 1.0
     assert policy.confidence_at(due=400, epoch=0, fitted=True) == 1.0
     settled_high = ConsolidationPolicy(settled_confidence=3.0, unfitted_confidence=2.5)
-    assert settled_high.confidence_at(due=20_000, epoch=0, fitted=False) == 3.0
+    assert settled_high.confidence_at(due=50_000, epoch=0, fitted=False) == 3.0
     asked: list[tuple[int, int, float]] = []
 
     def recording(
@@ -1406,8 +1414,14 @@ def test_a_consolidating_config_stored_before_refit_keeps_its_behaviour_and_byte
     stored = learning_config(
         "consolidating", typical_cost=space.typical_cost(), n_vehicles=4, objective=ROUTING
     ).to_dict()
-    assert stored["consolidation"]["refit"] == 1.5
+    assert stored["consolidation"]["refit"] == 1.1
     assert stored["consolidation"]["fresh_baseline"] is True
+    # a fleet stored with the earlier schedule (growth 1.25, refit 1.5) keeps it
+    earlier = {**stored["consolidation"], "growth": 1.25, "refit": 1.5}
+    kept = FleetConfig.from_dict(json.loads(json.dumps({**stored, "consolidation": earlier})))
+    assert kept.consolidation is not None
+    assert (kept.consolidation.growth, kept.consolidation.refit) == (1.25, 1.5)
+    assert kept.to_dict()["consolidation"] == earlier
     without_refit = {**stored, "consolidation": {**stored["consolidation"], "refit": None}}
     newer = FleetConfig.from_dict(json.loads(json.dumps(without_refit)))
     del stored["consolidation"]["refit"], stored["consolidation"]["fresh_baseline"]
