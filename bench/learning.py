@@ -16,7 +16,10 @@ In the same run the *anchor*, the p-median of every target seen so far (the
 batch answer), is evaluated at the same checkpoints, and each rule's compute per
 target is measured against ``probe``, the rule whose compiled update served
 every fleet before (the named baseline). Medians over seeds; the worst network
-counts. ``--rest`` adds one curve through the REST API of a live
+counts. The distance behind the batch answer is given two ways: the median gap
+less the batch answer's median gap (``behind_anchor_from_1000``), and the median
+over seeds of each seed's gap less the batch answer of its own targets
+(``behind_anchor_paired_from_1000``). ``--rest`` adds one curve through the REST API of a live
 ``routing-svc serve`` (``targets:batch``).
 
 Run: ``python bench/learning.py`` (everything; long) or, e.g.,
@@ -306,6 +309,15 @@ def summarise(records: list[dict[str, Any]], rules: tuple[str, ...]) -> dict[str
                     label: statistics.median(x["rules"][rule][scenario]["gaps"][label] for x in rs)
                     for label in labels
                 }
+            if "cold" in rs[0]["rules"][rule]:  # each seed against its own stream's batch answer
+                entry[rule]["behind_anchor_paired"] = {
+                    label: statistics.median(
+                        x["rules"][rule]["cold"]["gaps"][label] - x["anchor"]["cold"][label]
+                        for x in rs
+                    )
+                    for label in rs[0]["rules"][rule]["cold"]["gaps"]
+                    if label in rs[0]["anchor"]["cold"]
+                }
             for measure in ("microseconds_per_target", "step_microseconds_per_target"):
                 entry[rule][measure] = statistics.median(
                     statistics.mean(s[measure] for s in x["rules"][rule].values()) for x in rs
@@ -360,6 +372,15 @@ def goals(summary: dict[str, Any], rule: str, baseline: str) -> dict[str, Any]:
                 (v - table[w.split("@")[0]]["anchor"]["cold"][w.split("@")[1]], w)
                 for v, w in values("cold", 1000)
                 if w.split("@")[1] in table[w.split("@")[0]]["anchor"]["cold"]
+            ],
+            GOALS["anchor_points"],
+        ),
+        "behind_anchor_paired_from_1000": (
+            [
+                (v, f"{key}@{label}")
+                for key, e in table.items()
+                for label, v in e[rule].get("behind_anchor_paired", {}).items()
+                if int(label) >= 1000
             ],
             GOALS["anchor_points"],
         ),
