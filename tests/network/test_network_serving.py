@@ -160,8 +160,11 @@ def _other_update(
     case: NetCase,
     rng: np.random.Generator,
     setup: Setup,
+    kinds: int = 4,
 ) -> None:
-    kind = rng.integers(4)
+    """One update of another kind: a target with a requirement, a restored snapshot, new
+    travel times or a reference set from outside, or (``kinds`` 4) another probe window."""
+    kind = rng.integers(kinds)
     if kind == 3:  # a new config: another probe window (or none)
         window = fleet.config.probe
         changed = dataclasses.replace(fleet.config, probe=None if window else 10.0)
@@ -220,6 +223,7 @@ def test_held_steps_search_through_the_kept_columns(case: NetCase, either_way: b
     held steps, consolidations, a target with a requirement, a restored snapshot, a
     reference set from outside."""
     n = 10
+    setup = Setup(either_way, "length", 1.0, Counting.VEHICLE, None)
     space = RoadSpace(case.network, either_way=either_way)
     config = learning_config(
         "consolidating",
@@ -248,24 +252,7 @@ def test_held_steps_search_through_the_kept_columns(case: NetCase, either_way: b
         assert fleet.assign(target) == reference.assign(target)
         counts["moved"] += got.moved_by > 0.0
         counts["consolidated"] += got.consolidation is not None
-        if k % 89 == 0:
+        if k % 89 == 0:  # no other probe window: the rule takes none
             counts["other"] += 1
-            kind = rng.integers(3)
-            if kind == 0:
-                target = _targets(case, rng, reference)
-                try:
-                    expected = reference.observe(target, ["default"])
-                except Unreachable:
-                    continue
-                _assert_same(fleet.observe(target, ["default"]), expected)
-            elif kind == 1:
-                data: dict[str, Any] = reference.snapshot()
-                fleet.restore(data)
-                reference.restore(data)
-            else:
-                i = int(rng.integers(n))
-                (moved,) = case.random_positions(rng, 1)
-                fleet.state.positions[i] = moved
-                reference.state.positions[i] = moved
-            _assert_same_state(fleet, reference)
+            _other_update(fleet, reference, case, rng, setup, kinds=3)
     assert counts["moved"] > 20 and counts["consolidated"] >= 3 and counts["other"] > 10, counts
