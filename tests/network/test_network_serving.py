@@ -115,6 +115,25 @@ def _fleets(
     )
 
 
+def _served_alike(
+    fleet: Fleet[NetPosition], reference: Fleet[NetPosition], target: NetPosition
+) -> Outcome[NetPosition] | None:
+    """Serve ``target`` in both fleets, assert the same outcome and state, return the
+    outcome; ``None`` when the reference finds it unreachable, which the fleet must find
+    too, changing nothing."""
+    try:
+        expected = reference.observe(target)
+    except Unreachable:
+        with pytest.raises(Unreachable):
+            fleet.observe(target)
+        _assert_same_state(fleet, reference)
+        return None
+    got = fleet.observe(target)
+    _assert_same(got, expected)
+    _assert_same_state(fleet, reference)
+    return got
+
+
 def _assert_same(got: Outcome[NetPosition], expected: Outcome[NetPosition]) -> None:
     assert got == expected  # dataclass equality: every float bit for bit (no NaN here)
     assert type(got.new_position.offset) is float and type(got.new_position.edge) is int
@@ -133,16 +152,9 @@ def test_compiled_update_equals_the_methods(case: NetCase, setup: Setup) -> None
     counts: dict[str, int] = {"backed": 0, "moved_edge": 0, "entries": 0, "other": 0}
     for k in range(1500):
         target = _targets(case, rng, reference)
-        try:
-            expected = reference.observe(target)
-        except Unreachable:
-            with pytest.raises(Unreachable):
-                fleet.observe(target)
-            _assert_same_state(fleet, reference)
+        got = _served_alike(fleet, reference, target)
+        if got is None:
             continue
-        got = fleet.observe(target)
-        _assert_same(got, expected)
-        _assert_same_state(fleet, reference)
         counts["backed"] += len(got.backed_off)
         counts["moved_edge"] += got.new_position.edge != got.old_position.edge
         counts["entries"] += sum(e is not None for e in fleet.state.entries) > 0
@@ -240,15 +252,9 @@ def test_held_steps_search_through_the_kept_columns(case: NetCase, either_way: b
     counts = {"moved": 0, "consolidated": 0, "other": 0}
     for k in range(1200):
         target = _targets(case, rng, reference)
-        try:
-            expected = reference.observe(target)
-        except Unreachable:
-            with pytest.raises(Unreachable):
-                fleet.observe(target)
+        got = _served_alike(fleet, reference, target)
+        if got is None:
             continue
-        got = fleet.observe(target)
-        _assert_same(got, expected)
-        _assert_same_state(fleet, reference)
         assert fleet.assign(target) == reference.assign(target)
         counts["moved"] += got.moved_by > 0.0
         counts["consolidated"] += got.consolidation is not None

@@ -823,6 +823,15 @@ def consolidating_fleet(
 CALM = ConsolidationPolicy(shift_ratio=1e9)  # the shift test never fires
 
 
+def small_calm(**changes: Any) -> ConsolidationPolicy:
+    """A small reservoir on the schedule of periods of a quarter, no shift test: the
+    schedules and confidences the tests below work out by hand."""
+    base: dict[str, Any] = dict(
+        reservoir=400, first=50, growth=1.25, longest=100, block=50, shift_ratio=1e9
+    )
+    return ConsolidationPolicy(**{**base, **changes})
+
+
 def test_policy_defaults() -> None:
     policy = ConsolidationPolicy()
     # the values docs/learning.md states
@@ -868,9 +877,7 @@ def test_consolidations_happen_on_the_schedule(calm_run: Run) -> None:
 def test_a_fleet_whose_consolidations_are_turned_down_consolidates_more_rarely(
     space: RoadSpace,
 ) -> None:
-    policy = ConsolidationPolicy(
-        reservoir=400, first=50, growth=1.25, longest=100, slowest=800, block=50, shift_ratio=1e9
-    )
+    policy = small_calm(slowest=800)
     _, stream = demand_stream(3, 6000)
     fleet = consolidating_fleet(space, policy=policy)
     outcomes = [fleet.observe(z) for z in stream]
@@ -893,16 +900,7 @@ def test_a_fleet_whose_consolidations_are_turned_down_consolidates_more_rarely(
 def test_a_settled_demand_asks_more_of_a_consolidation(
     space: RoadSpace, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    policy = ConsolidationPolicy(
-        reservoir=400,
-        first=50,
-        growth=1.25,
-        longest=100,
-        block=50,
-        shift_ratio=1e9,
-        settled_confidence=2.0,
-        unfitted_confidence=0.0,
-    )
+    policy = small_calm(settled_confidence=2.0, unfitted_confidence=0.0)
     # by hand: the epoch's clock is a quarter of its targets, settled from 400 targets on
     assert policy.confidence_at(due=396, epoch=0, fitted=True) == 0.0  # 99
     assert policy.confidence_at(due=400, epoch=0, fitted=True) == 2.0  # 100
@@ -927,15 +925,7 @@ def test_a_settled_demand_asks_more_of_a_consolidation(
 def test_references_no_consolidation_fitted_ask_more_and_hold_still(
     space: RoadSpace, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    policy = ConsolidationPolicy(
-        reservoir=400,
-        first=50,
-        growth=1.25,
-        longest=100,
-        block=50,
-        shift_ratio=1e9,
-        unfitted_confidence=2.5,
-    )
+    policy = small_calm(unfitted_confidence=2.5)
     # by hand: the larger of the epoch's confidence and the unfitted one, until a fit
     assert policy.confidence_at(due=396, epoch=0, fitted=False) == 2.5
     assert policy.confidence_at(due=396, epoch=0, fitted=True) == 0.0
