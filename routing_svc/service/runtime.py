@@ -114,6 +114,7 @@ class FleetRuntime:
         if replaying:
             outcome = self.fleet.replay_observe(target, requires, recorded)
         else:
+            self._hand_over_due()  # one that fell due in events caught up from the log
             pending = self._pending
             solved = None if pending is None else pending.solved(self.fleet.state.targets)
             outcome = self.fleet.observe(target, requires, solved=solved)

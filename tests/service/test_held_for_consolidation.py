@@ -124,3 +124,35 @@ def test_a_batch_leaves_a_held_fleet_queued_in_order_and_takes_the_others() -> N
     assert take_batch(queue, lambda f, n: True) == []
     assert take_batch(queue) == [order[2], order[5]]
     assert not queue
+
+
+def test_a_consolidation_due_in_another_process_s_events_is_applied_on_time(
+    db_url: str, tmp_path: Path, make_client: Callable[..., TestClient]
+) -> None:
+    """Two services on one log, as two worker processes: the one that saw the
+    consolidation fall due never finishes its solve; the other, catching up past
+    ``apply_by`` from the log, hands it to its own solver and its first target waits."""
+    saw_due, catches_up = make_client(db_url), make_client(db_url)
+    never_answers, other = HandSolver(), HandSolver()
+    saw_due.app.state.fleets.solver = never_answers  # type: ignore[attr-defined]
+    catches_up.app.state.fleets.solver = other  # type: ignore[attr-defined]
+    assert saw_due.post("/v1/fleets", json=spread_fleet_body("f")).status_code == 201
+    assert catches_up.get("/v1/fleets/f").json()["version"] == 1  # in its memory, behind
+    stream = hotspot_stream(APPLY_BY + 1)
+    post_batches(saw_due, "f", stream[:APPLY_BY])
+    [(job, _)] = never_answers.jobs  # due at the 250th target
+    waiting, out = in_background(lambda: catches_up.post("/v1/fleets/f/targets", json=stream[-1]))
+    deadline = time.monotonic() + 60
+    while not other.jobs:  # the caught-up service hands the due solve to its solver
+        assert time.monotonic() < deadline, "the caught-up service never asked for the solve"
+        time.sleep(0.01)
+    [(its_job, answer)] = other.jobs
+    assert its_job.key == job.key and its_job.apply_by == APPLY_BY
+    time.sleep(0.3)
+    assert out == []  # its first target waits for the solve
+    answer.set_result(its_job.solve())
+    waiting.join(timeout=60)
+    [r] = out
+    assert r.status_code == 200, r.text
+    assert r.json()["seq"] == APPLY_BY + 2 and "consolidated" in r.json()
+    assert replay_ok(db_url, tmp_path)["ok"] is True
