@@ -231,7 +231,10 @@ function schedulePosts(state) {
       const answer = await api.posts(state.id);
       if (state === page.state) layer.renderPosts(state, answer);
     } catch (error) {
-      if (state === page.state) showMessage(`Could not read the posts: ${error.message}`, { alert: true });
+      // 404: the fleet was deleted meanwhile, which its live stream reports
+      if (state === page.state && error.status !== 404) {
+        showMessage(`Could not read the posts: ${error.message}`, { alert: true });
+      }
     }
   }, POSTS_DELAY_MS);
 }
