@@ -17,6 +17,7 @@ from functools import cached_property
 from typing import Literal
 
 import numpy as np
+from numba import njit
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
@@ -207,7 +208,13 @@ class DistanceRows:
 
     def rows(self, edges: IntArray) -> FloatArray:
         """The rows of ``edges``, shape ``(len(edges), n_edges)``."""
-        out = np.empty((edges.shape[0], self.network.n_edges))
+        return self.rows_at(edges, None)
+
+    def rows_at(self, edges: IntArray, columns: IntArray | None) -> FloatArray:
+        """The rows of ``edges`` at ``columns`` (every edge if ``None``), shape
+        ``(len(edges), len(columns))``."""
+        width = self.network.n_edges if columns is None else columns.shape[0]
+        out = np.empty((edges.shape[0], width))
         missing: list[int] = []
         with self._lock:
             for k, edge in enumerate(edges.tolist()):
@@ -216,18 +223,19 @@ class DistanceRows:
                     missing.append(k)
                 else:
                     self._memo.move_to_end(edge)
-                    out[k] = row
+                    out[k] = row if columns is None else row[columns]
         if missing:
             if self._graph is None:
                 self._graph = _edge_graph(self.network, self.costs)
-            out[missing] = self._to_starts(
+            found = self._to_starts(
                 np.atleast_2d(dijkstra(self._graph, directed=True, indices=edges[missing]))
             )
+            out[missing] = found if columns is None else found[:, columns]
             if self._capacity == 0:
                 return out
             with self._lock:
-                for k in missing:
-                    row = out[k].copy()
+                for k, found_row in zip(missing, found, strict=True):
+                    row = found_row.copy()  # the memo bounds whole rows, not views of a chunk
                     row.flags.writeable = False
                     self._memo[int(edges[k])] = row
                 while len(self._memo) > self._capacity:
@@ -279,15 +287,11 @@ def cost_matrix(
     chunk = max(1, _MATRIX_CELLS // max(network.n_edges, 1))
     to_start = np.empty((uniq_src.shape[0], uniq_tgt.shape[0]))
     for lo in range(0, uniq_src.shape[0], chunk):
-        np.take(
-            rows.rows(uniq_src[lo : lo + chunk]), uniq_tgt, axis=1, out=to_start[lo : lo + chunk]
-        )
+        to_start[lo : lo + chunk] = rows.rows_at(uniq_src[lo : lo + chunk], uniq_tgt)
     rate = costs.rate
     leave = (network.length[src_edge] - src_off) * rate[src_edge]
     enter = tgt_off * rate[tgt_edge]
-    np.take(to_start[src_row], tgt_col, axis=1, out=out)
-    out += leave[:, None]
-    out += enter[None, :]
+    _assemble(to_start, src_row, tgt_col, leave, enter, out)
     same_rows, same_cols = _same_edge_pairs(src_edge, src_off, tgt_edge, tgt_off)
     out[same_rows, same_cols] = (tgt_off[same_cols] - src_off[same_rows]) * rate[
         tgt_edge[same_cols]
@@ -296,6 +300,22 @@ def cost_matrix(
         i, j = (int(v[0]) for v in np.nonzero(~np.isfinite(out)))
         raise Unreachable(f"target {j} cannot be reached from source {i}")
     return out
+
+
+@njit(cache=True, nogil=True)
+def _assemble(
+    to_start: FloatArray,
+    src_row: IntArray,
+    tgt_col: IntArray,
+    leave: FloatArray,
+    enter: FloatArray,
+    out: FloatArray,
+) -> None:
+    """``out[i, j] = (to_start[src_row[i], tgt_col[j]] + leave[i]) + enter[j]``."""
+    for i in range(out.shape[0]):
+        row = to_start[src_row[i]]
+        for j in range(out.shape[1]):
+            out[i, j] = (row[tgt_col[j]] + leave[i]) + enter[j]
 
 
 def _same_edge_pairs(

@@ -27,6 +27,7 @@ from routing_svc.network.costs import (
     EdgeCosts,
     check_position,
     cost_matrix,
+    position_arrays,
 )
 from routing_svc.network.moves import (
     ENTRY_FOUND,
@@ -51,7 +52,7 @@ from routing_svc.network.search import (
 from routing_svc.network.serving import FleetUpdate
 from routing_svc.network.snapping import point_on_edge
 from routing_svc.network.stops import candidate_references, junction_ahead
-from routing_svc.network.twins import reverse_edges, twin
+from routing_svc.network.twins import reverse_edges, twin, twin_columns
 from routing_svc.network.walking import check_route, random_walk, walk_route
 from routing_svc.sa.space import Assignment, Requirement
 from routing_svc.types import FloatArray, Int32Array, IntArray, NetPosition
@@ -309,12 +310,19 @@ class RoadSpace:
         """
         costs = cost_matrix(self._rows, sources, targets)
         if self.either_way and len(sources):
-            twins = [twin(self.network, p) for p in sources]
-            rows = [i for i, t in enumerate(twins) if t is not None]
-            alternatives = [t for t in twins if t is not None]
-            if rows:
+            edges, offsets = position_arrays(self.network, sources, what="source")
+            twin_edges, twin_offsets = twin_columns(self.network, edges, offsets)
+            rows = np.flatnonzero(twin_edges >= 0)
+            if rows.size:
+                alternatives = [
+                    NetPosition(e, o)
+                    for e, o in zip(
+                        twin_edges[rows].tolist(), twin_offsets[rows].tolist(), strict=True
+                    )
+                ]
                 alt = cost_matrix(self._rows, alternatives, targets)
-                costs[rows] = np.minimum(costs[rows], alt)
+                np.minimum(costs[rows], alt, out=alt)
+                costs[rows] = alt
         return costs
 
     def advance(
