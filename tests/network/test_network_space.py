@@ -64,9 +64,12 @@ def test_cost_matrix_rows_from_the_memo_match_path_costs(case: NetCase) -> None:
     edges = np.array(sorted({s.edge for s in sources}), dtype=np.int64)
     tiny = DistanceRows(case.network, space.edge_costs, max_bytes=3 * 8 * case.network.n_edges)
     uncached = DistanceRows(case.network, space.edge_costs, max_bytes=0).rows(edges)
+    columns = np.array([5, 0, 5, case.network.n_edges - 1], dtype=np.int64)
     for _ in range(2):
         np.testing.assert_array_equal(tiny.rows(edges), uncached)
         np.testing.assert_array_equal(tiny.rows(edges[::-1]), uncached[::-1])
+        # some rows from the memo, some computed: only the columns asked for, in order
+        np.testing.assert_array_equal(tiny.rows_at(edges, columns), uncached[:, columns])
     assert len(tiny) == 3
 
 
