@@ -255,7 +255,9 @@ class DistanceRows:
 
 
 def cost_matrix(
-    rows: DistanceRows, sources: Sequence[NetPosition], targets: Sequence[NetPosition]
+    rows: DistanceRows,
+    sources: tuple[IntArray, FloatArray],
+    targets: tuple[IntArray, FloatArray],
 ) -> FloatArray:
     """Directed shortest-path costs from every source to every target position, on the
     network and under the edge costs of ``rows``.
@@ -264,21 +266,27 @@ def cost_matrix(
     edge comes from ``rows``, a chunk of sources at a time; the parts along the
     source's and the target's edges are added.
 
+    Parameters
+    ----------
+    rows : DistanceRows
+        The network's shortest-path rows under its edge costs.
+    sources, targets : tuple of arrays
+        Edge indices and offsets of positions on the network
+        (:func:`position_arrays`, which validates them).
+
     Returns
     -------
     FloatArray
-        Shape ``(len(sources), len(targets))``.
+        Shape ``(len(sources[0]), len(targets[0]))``.
 
     Raises
     ------
-    InvalidInput
-        If a position is not on the network.
     Unreachable
         If some target cannot be reached from some source.
     """
     network, costs = rows.network, rows.costs
-    src_edge, src_off = position_arrays(network, sources, what="source")
-    tgt_edge, tgt_off = position_arrays(network, targets, what="target")
+    src_edge, src_off = sources
+    tgt_edge, tgt_off = targets
     out = np.empty((src_edge.shape[0], tgt_edge.shape[0]))
     if out.size == 0:
         return out

@@ -308,19 +308,14 @@ class RoadSpace:
         Uses scipy's Dijkstra, one run per distinct source edge not among the space's
         recently used ones (see :func:`routing_svc.network.costs.cost_matrix`).
         """
-        costs = cost_matrix(self._rows, sources, targets)
-        if self.either_way and len(sources):
-            edges, offsets = position_arrays(self.network, sources, what="source")
+        edges, offsets = position_arrays(self.network, sources, what="source")
+        columns = position_arrays(self.network, targets, what="target")
+        costs = cost_matrix(self._rows, (edges, offsets), columns)
+        if self.either_way and edges.size:
             twin_edges, twin_offsets = twin_columns(self.network, edges, offsets)
             rows = np.flatnonzero(twin_edges >= 0)
             if rows.size:
-                alternatives = [
-                    NetPosition(e, o)
-                    for e, o in zip(
-                        twin_edges[rows].tolist(), twin_offsets[rows].tolist(), strict=True
-                    )
-                ]
-                alt = cost_matrix(self._rows, alternatives, targets)
+                alt = cost_matrix(self._rows, (twin_edges[rows], twin_offsets[rows]), columns)
                 np.minimum(costs[rows], alt, out=alt)
                 costs[rows] = alt
         return costs
