@@ -24,7 +24,8 @@ over seeds of each seed's gap less the batch answer of its own targets
 
 Run: ``python bench/learning.py`` (everything; long) or, e.g.,
 ``python bench/learning.py --nets drt,bologna --seeds 0,1 --targets 10000``; a network
-of your own is ``--nets town=town.net.xml.gz``.
+of your own is ``--nets town=town.net.xml.gz``; ``--cost time`` prices every path in
+free-flow travel time instead of metres.
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ from routing_svc.demand.spec import DemandRecipe, Hotspots, network_demand, pars
 from routing_svc.errors import InvalidInput, UnknownNetwork
 from routing_svc.network import RoadSpace, load_network
 from routing_svc.network.catalogue import named_network, resolve_network
+from routing_svc.network.costs import CostKind
 from routing_svc.optimum import MAX_SITES, expected_cost, solve_demand, solve_pmedian
 from routing_svc.sa import Fleet, Objective, Rule, Vehicle, learning_config
 from routing_svc.types import FloatArray, NetPosition
@@ -115,10 +117,15 @@ def optimum_of(
 
 
 def instance(
-    net: str, n: int, seed: int, spec: str = DEFAULT_DEMAND, spread: float | None = None
+    net: str,
+    n: int,
+    seed: int,
+    spec: str = DEFAULT_DEMAND,
+    spread: float | None = None,
+    cost: CostKind = "length",
 ) -> Instance:
     network = load_network(network_file(net))
-    space = RoadSpace(network)
+    space = RoadSpace(network, cost=cost)
     recipe = parse_demand_spec(spec)
     if spread is not None and isinstance(recipe.form, Hotspots):
         xmin, ymin, xmax, ymax = network.bounds
@@ -212,7 +219,7 @@ def _warm_up(inst: Instance, config: Any, start: list[NetPosition], stream: list
     if config.rule.value in _warmed:
         return
     _warmed.add(config.rule.value)
-    space = RoadSpace(inst.space.network)
+    space = RoadSpace(inst.space.network, cost=inst.space.cost_kind)
     vehicles = [(Vehicle(f"w{i:03d}"), p) for i, p in enumerate(start)]
     throwaway = Fleet.create(space, vehicles, config)
     for z in stream[:WARM_UP_TARGETS]:
@@ -261,16 +268,17 @@ def anchor_gaps(inst: Instance, n: int, seed: int, targets: int) -> dict[str, di
     return out
 
 
-Job = tuple[str, int, int, tuple[str, ...], tuple[str, ...], int, str, float | None]
+Job = tuple[str, int, int, tuple[str, ...], tuple[str, ...], int, str, float | None, CostKind]
 
 
 def job(args: Job) -> dict[str, Any]:
-    net, n, seed, rules, scenarios, targets, spec, spread = args
+    net, n, seed, rules, scenarios, targets, spec, spread, cost = args
     t0 = time.perf_counter()
-    inst = instance(net, n, seed, spec, spread)
+    inst = instance(net, n, seed, spec, spread, cost)
     record: dict[str, Any] = {
         "demand": spec,
         "spread": spread,
+        "cost": cost,
         "network": network_name(net),
         "vehicles": n,
         "seed": seed,
@@ -420,12 +428,12 @@ def free_port() -> int:
 
 
 def rest_curve(
-    net: str, n: int, seed: int, targets: int, spec: str, spread: float | None
+    net: str, n: int, seed: int, targets: int, spec: str, spread: float | None, cost: CostKind
 ) -> dict[str, Any]:
     """The cold curve of the default rule through a live ``routing-svc serve``."""
     import httpx
 
-    inst = instance(net, n, seed, spec, spread)
+    inst = instance(net, n, seed, spec, spread, cost)
     space = inst.space
     network = space.network
     port = free_port()
@@ -469,7 +477,12 @@ def rest_curve(
             ]
             created = client.post(
                 "/v1/fleets",
-                json={"id": "bench", "network": network_name(net), "vehicles": vehicles},
+                json={
+                    "id": "bench",
+                    "network": network_name(net),
+                    "cost": cost,
+                    "vehicles": vehicles,
+                },
             )
             created.raise_for_status()
             stream = inst.demand.sample(np.random.default_rng([seed, 1]), targets)
@@ -534,6 +547,12 @@ def main() -> int:
         help="the hotspots' standard deviation as a fraction of the network's diagonal "
         "(default 0.1)",
     )
+    p.add_argument(
+        "--cost",
+        choices=("length", "time"),
+        default="length",
+        help="shortest-path cost of every fleet: metres or free-flow travel time (default length)",
+    )
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--rest", action="store_true", help="add one curve through the REST API")
     p.add_argument("--out", type=Path, help="also write the JSON here")
@@ -564,8 +583,9 @@ def main() -> int:
         p.error("--spread must be a fraction > 0")
     if "shift" in scenarios and not isinstance(form, Hotspots):
         p.error(f"a shift moves hotspots; --demand {args.demand} has none (--scenarios cold,warm)")
-    work = [
-        (net, int(n), int(seed), rules, scenarios, args.targets, args.demand, args.spread)
+    demand = (args.demand, args.spread, args.cost)
+    work: list[Job] = [
+        (net, int(n), int(seed), rules, scenarios, args.targets, *demand)
         for net in nets
         for n in args.vehicles.split(",")
         for seed in args.seeds.split(",")
@@ -590,6 +610,7 @@ def main() -> int:
         if args.summarise is None
         else sorted({r.get("demand", DEFAULT_DEMAND) for r in records}),
         "spread": args.spread,
+        "cost": args.cost,
         "baseline": {"compute": "probe (the compiled update of the rule before)"},
         "checkpoints": list(CHECKPOINTS),
         "shift": {"at": SHIFT_AT, "after": list(AFTER_SHIFT)},
@@ -601,7 +622,13 @@ def main() -> int:
     }
     if args.rest:
         report["rest"] = rest_curve(
-            nets[0], int(args.vehicles.split(",")[0]), 0, args.targets, args.demand, args.spread
+            nets[0],
+            int(args.vehicles.split(",")[0]),
+            0,
+            args.targets,
+            args.demand,
+            args.spread,
+            args.cost,
         )
     text = json.dumps(report, indent=1)
     if args.out:
