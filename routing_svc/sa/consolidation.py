@@ -129,6 +129,12 @@ class ConsolidationPolicy:
         cross-validated test finds it worse by more than one standard error (more
         targets of the same demand make a better estimate of its p-median); ``None``:
         only the test decides.
+    tested_refit : bool
+        Whether such a refit faces the test at all. The test's challengers are fitted
+        to ``(folds - 1) / folds`` of the reservoir, no more targets than the
+        references had until it has outgrown their fit by ``folds / (folds - 1)``, so
+        while it grows by less it turns the better estimate down on noise; untested,
+        the fit of the whole reservoir is taken (and no fold is solved).
     fresh_baseline : bool
         The shift test's baseline is :attr:`Consolidation.fresh_baseline` (the cost of
         targets the references were not fitted to), else :attr:`Consolidation.baseline`.
@@ -156,6 +162,7 @@ class ConsolidationPolicy:
     shift_ratio: float = 1.25
     shift_confidence: float = 2.0
     refit: float | None = 1.1
+    tested_refit: bool = False
     fresh_baseline: bool = True
     checked_moves: bool = True
     shakes: int = 20
@@ -190,7 +197,7 @@ class ConsolidationPolicy:
             raise InvalidInput("consolidation refit must be a finite number > 1, or null")
         if isinstance(self.shakes, bool) or not isinstance(self.shakes, int) or self.shakes < 0:
             raise InvalidInput(f"consolidation shakes must be an integer >= 0, got {self.shakes!r}")
-        for flag in ("fresh_baseline", "checked_moves"):
+        for flag in ("tested_refit", "fresh_baseline", "checked_moves"):
             if not isinstance(getattr(self, flag), bool):
                 raise InvalidInput(f"consolidation {flag} must be true or false")
 
@@ -212,6 +219,7 @@ class ConsolidationPolicy:
                 else {}
             ),
             **({} if self.refit is None else {"refit": self.refit}),
+            **({} if self.tested_refit else {"tested_refit": False}),
             **({"fresh_baseline": True} if self.fresh_baseline else {}),
             **({"checked_moves": True} if self.checked_moves else {}),
             **({"shakes": self.shakes} if self.shakes else {}),
@@ -225,16 +233,18 @@ class ConsolidationPolicy:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> ConsolidationPolicy:
-        """A stored policy; one stored without ``refit``, ``fresh_baseline``,
-        ``checked_moves``, ``shakes``, ``slowest``, ``settled_confidence``,
-        ``shift_confidence`` or ``unfitted_confidence`` keeps the behaviour it was stored
-        with (no refit, the reservoir's baseline, unchecked moves, no shakes, the epoch's
-        clock alone, one confidence throughout, the shift test's ratio alone, no more
-        asked of references no consolidation fitted)."""
+        """A stored policy; one stored without ``refit``, ``tested_refit``,
+        ``fresh_baseline``, ``checked_moves``, ``shakes``, ``slowest``,
+        ``settled_confidence``, ``shift_confidence`` or ``unfitted_confidence`` keeps the
+        behaviour it was stored with (no refit, a refit tested, the reservoir's baseline,
+        unchecked moves, no shakes, the epoch's clock alone, one confidence throughout,
+        the shift test's ratio alone, no more asked of references no consolidation
+        fitted)."""
         if not isinstance(data, dict):
             raise InvalidInput("consolidation must be an object")
         legacy = {
             "refit": None,
+            "tested_refit": True,
             "fresh_baseline": False,
             "checked_moves": False,
             "shakes": 0,
@@ -360,7 +370,8 @@ class Consolidation(Generic[P]):
     def fresh_baseline(self) -> float:
         """The mean cost to expect from the references afterwards, measured only on
         targets they were not fitted to: the tested targets' cost before plus the
-        cross-validated gain when accepted; :attr:`baseline` when nothing was tested."""
+        cross-validated gain when accepted (a refit taken untested has none);
+        :attr:`baseline` when nothing was tested."""
         if self.fresh_before is None:
             return self.baseline
         return self.fresh_before + self.gain if self.accepted else self.fresh_before
@@ -420,6 +431,7 @@ def consolidate(
     fresh: int,
     folds: int = 2,
     refit: bool = False,
+    tested_refit: bool = True,
     stands: StandSet[P] | None = None,
     shakes: int = 0,
 ) -> Consolidation[P]:
@@ -452,6 +464,10 @@ def consolidate(
         The references were fitted to a reservoir this one outgrows
         (:attr:`ConsolidationPolicy.refit`): solving all is taken unless the test finds
         it worse by more than one standard error.
+    tested_refit : bool
+        ``False``: a refit is taken without the test (no fold is solved; the gain and
+        its standard error are recorded as 0), if a fresh target prices the
+        references before.
     stands : StandSet, optional
         Solve over these stands only, with their capacities
         (:func:`routing_svc.sa.stands.capacitated_sites`); the cost before is that of
@@ -498,6 +514,38 @@ def consolidate(
     costs /= speed
     costs **= power
     now = costs[actual].min(axis=0)
+    before = float(weight @ now) / float(weight.sum())
+
+    def taken(gain: float, standard_error: float, fresh_before: float) -> Consolidation[P]:
+        """Solve the whole reservoir and take its best."""
+
+        def solved(_: int) -> IntArray:
+            return searched(costs, weight, best_fit(costs, weight, [current, anchored]), shakes)
+
+        if stands is None:
+            ordered = _pair(current, solved(p))
+        else:
+            ordered = _pair(actual, capacitated_sites(costs, weight, stands.capacities, p, solved))
+        chosen_costs = costs[ordered]
+        owner = chosen_costs.argmin(axis=0)
+        served = np.bincount(owner, weights=weight, minlength=p)
+        after = float(weight @ chosen_costs[owner, np.arange(owner.size)]) / float(weight.sum())
+        return Consolidation(
+            True,
+            tuple(sites[i] for i in ordered.tolist()),
+            tuple(round(s) for s in served.tolist()),
+            len(reservoir),
+            before,
+            after,
+            gain,
+            standard_error,
+            fresh_before,
+        )
+
+    if refit and not tested_refit:
+        fresh_weight = np.bincount(places[first_fresh:], minlength=len(targets))
+        if fresh_weight.any():
+            return taken(0.0, 0.0, float(fresh_weight @ now) / float(fresh_weight.sum()))
     folds_tested = [(part, test, test > 0) for part, test in zip(parts, tests, strict=True)]
     folds_tested = [fold for fold in folds_tested if fold[2].any()]
     challengers = _fold_fits(
@@ -509,7 +557,6 @@ def consolidate(
         weights.append(test[tested])
         tested_now.append(now[tested])
     if not differences:
-        before = float(weight @ now) / float(weight.sum())
         return Consolidation(
             False, tuple(positions), tuple(updates), len(reservoir), before, before, 0.0, 0.0
         )
@@ -518,7 +565,6 @@ def consolidate(
     gain = float(tested_weight @ difference) / total
     spread = float(tested_weight @ (difference - gain) ** 2) / total
     standard_error = math.sqrt(max(spread, 0.0) / total)
-    before = float(weight @ now) / float(weight.sum())
     fresh_before = float(tested_weight @ np.concatenate(tested_now)) / total
     pays = gain < -confidence * standard_error and gain < 0.0
     if not (pays or (refit and gain <= standard_error)):
@@ -526,30 +572,7 @@ def consolidate(
             False, tuple(positions), tuple(updates), len(reservoir), before, before, gain,
             standard_error, fresh_before,
         )  # fmt: skip
-
-    def solved(_: int) -> IntArray:
-        return searched(costs, weight, best_fit(costs, weight, [current, anchored]), shakes)
-
-    if stands is None:
-        ordered = _pair(current, solved(p))
-    else:
-        slots = capacitated_sites(costs, weight, stands.capacities, p, solved)
-        ordered = _pair(actual, slots)
-    chosen_costs = costs[ordered]
-    owner = chosen_costs.argmin(axis=0)
-    served = np.bincount(owner, weights=weight, minlength=p)
-    after = float(weight @ chosen_costs[owner, np.arange(owner.size)]) / float(weight.sum())
-    return Consolidation(
-        True,
-        tuple(sites[i] for i in ordered.tolist()),
-        tuple(round(s) for s in served.tolist()),
-        len(reservoir),
-        before,
-        after,
-        gain,
-        standard_error,
-        fresh_before,
-    )
+    return taken(gain, standard_error, fresh_before)
 
 
 ConsolidationKey = tuple[int, int]
@@ -578,6 +601,7 @@ class ConsolidationJob(Generic[P]):
     fresh: int
     folds: int
     refit: bool
+    tested_refit: bool
     stands: StandSet[P] | None
     shakes: int
 
@@ -595,6 +619,7 @@ class ConsolidationJob(Generic[P]):
             fresh=self.fresh,
             folds=self.folds,
             refit=self.refit,
+            tested_refit=self.tested_refit,
             stands=self.stands,
             shakes=self.shakes,
         )

@@ -795,6 +795,7 @@ class Fleet(Generic[P]):
             refit=policy.refit is not None
             and learning.fitted > 0
             and len(learning.reservoir) >= policy.refit * learning.fitted,
+            tested_refit=policy.tested_refit,
             stands=self.config.stands,
             shakes=policy.shakes,
         )

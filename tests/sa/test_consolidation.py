@@ -416,6 +416,63 @@ def test_a_refit_is_taken_unless_it_tests_worse_by_more_than_one_standard_error(
     assert "refit only" in seen and "both" in seen
 
 
+def test_an_untested_refit_takes_the_fit_of_the_whole_reservoir(space: RoadSpace) -> None:
+    # the reservoirs of the test above: untested, the refit is taken wherever the test
+    # turns it down or takes it, and no fold is solved
+    turned_down = 0
+    for seed in range(40):
+        _, reservoir = demand_stream(seed, 60)
+        half = reservoir[:30]
+        sites = sites_of(space, half, poor_start(2), [])
+        _, rows = brute_force(service_costs(space, sites, half, 1.0), 2)
+        start = [sites[i] for i in rows]
+        tested, untested = (
+            consolidate(
+                space,
+                start,
+                start,
+                reservoir,
+                power=1.0,
+                speed=1.0,
+                confidence=0.0,
+                updates=[1, 1],
+                fresh=30,
+                refit=True,
+                tested_refit=flag,
+                shakes=20,
+            )
+            for flag in (True, False)
+        )
+        turned_down += not tested.accepted
+        assert untested.accepted is True
+        # the best pair of the candidate references for the whole reservoir, by enumeration
+        # (the neighbourhood search with the policy's shakes reaches it on all of these)
+        candidates = sites_of(space, reservoir, start, start)
+        best, _ = brute_force(service_costs(space, candidates, reservoir, 1.0), 2)
+        taken = sample_objective(space, untested.positions, reservoir, 1.0)
+        assert taken == pytest.approx(best, rel=1e-12)
+        assert untested.sample_after == pytest.approx(best / len(reservoir), rel=1e-12)
+        if tested.accepted:  # the same solve
+            assert (untested.positions, untested.updates) == (tested.positions, tested.updates)
+        assert untested.gain == untested.standard_error == 0.0
+        assert sum(untested.updates) == len(reservoir)
+        # the references before, priced on the 30 targets they were not fitted to
+        fresh = sample_objective(space, start, reservoir[30:], 1.0, 1.0) / 30
+        assert untested.fresh_before == pytest.approx(fresh, rel=1e-12)
+        assert untested.fresh_before == pytest.approx(tested.fresh_before, rel=1e-12)
+        # no gain estimated: the shift test expects what the references before cost
+        assert untested.fresh_baseline == untested.fresh_before
+        assert untested.sample_after <= untested.sample_before
+    assert turned_down > 0
+    # without a fresh target nothing prices the references before: nothing is taken
+    _, reservoir = demand_stream(5, 40)
+    none_fresh = consolidate(
+        space, poor_start(2), poor_start(2), reservoir, power=1.0, speed=1.0,
+        confidence=0.0, updates=[1, 1], fresh=0, refit=True, tested_refit=False,
+    )  # fmt: skip
+    assert none_fresh.accepted is False
+
+
 def plain_fit(space: RoadSpace, reservoir: Sequence[NetPosition]) -> tuple[NetPosition, ...]:
     """What a consolidation that is taken puts in place: a test with every target fresh
     against references that serve nothing well."""
@@ -661,6 +718,8 @@ def test_consolidate_rejects_mismatched_inputs(space: RoadSpace) -> None:
         {"unfitted_confidence": math.nan},
         {"unfitted_confidence": "2"},
         {"unfitted_confidence": False},
+        {"tested_refit": 1},
+        {"tested_refit": "false"},
     ],
 )
 def test_policy_validation(bad: dict[str, Any]) -> None:
@@ -696,6 +755,7 @@ def test_policy_round_trip() -> None:
         ConsolidationPolicy(shift_confidence=1.5),
         ConsolidationPolicy(unfitted_confidence=0.0),
         ConsolidationPolicy(unfitted_confidence=3.5),
+        ConsolidationPolicy(tested_refit=True),
     ):
         data = json.loads(json.dumps(policy.to_dict()))
         assert ConsolidationPolicy.from_dict(data) == policy
@@ -703,6 +763,7 @@ def test_policy_round_trip() -> None:
     # the behaviour it had
     assert ConsolidationPolicy.from_dict({}) == ConsolidationPolicy(
         refit=None,
+        tested_refit=True,
         fresh_baseline=False,
         checked_moves=False,
         shakes=0,
@@ -1406,6 +1467,12 @@ def test_a_consolidating_config_stored_before_refit_keeps_its_behaviour_and_byte
     ).to_dict()
     assert stored["consolidation"]["refit"] == 1.1
     assert stored["consolidation"]["fresh_baseline"] is True
+    assert stored["consolidation"]["tested_refit"] is False
+    # a fleet stored before the untested refit keeps its test
+    tested = {k: v for k, v in stored["consolidation"].items() if k != "tested_refit"}
+    kept_test = FleetConfig.from_dict(json.loads(json.dumps({**stored, "consolidation": tested})))
+    assert kept_test.consolidation is not None and kept_test.consolidation.tested_refit is True
+    assert kept_test.to_dict()["consolidation"] == tested
     # a fleet stored with the earlier schedule (growth 1.25, refit 1.5) keeps it
     earlier = {**stored["consolidation"], "growth": 1.25, "refit": 1.5}
     kept = FleetConfig.from_dict(json.loads(json.dumps({**stored, "consolidation": earlier})))
