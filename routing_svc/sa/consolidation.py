@@ -491,12 +491,6 @@ def consolidate(
     ]
     weight = np.sum(parts, axis=0)
     first_fresh = len(reservoir) - min(max(fresh, 0), len(reservoir))
-    tests = [
-        np.bincount(
-            places[first_fresh + (f - first_fresh) % folds :: folds], minlength=len(targets)
-        ).astype(np.float64)
-        for f in range(folds)
-    ]
     if stands is None:
         stride = -(-len(targets) // MAX_SITE_TARGETS)
         sites = space.candidate_references(targets[::stride], [*positions, *anchor])
@@ -546,6 +540,12 @@ def consolidate(
         fresh_weight = np.bincount(places[first_fresh:], minlength=len(targets))
         if fresh_weight.any():
             return taken(0.0, 0.0, float(fresh_weight @ now) / float(fresh_weight.sum()))
+    tests = [
+        np.bincount(
+            places[first_fresh + (f - first_fresh) % folds :: folds], minlength=len(targets)
+        ).astype(np.float64)
+        for f in range(folds)
+    ]
     folds_tested = [(part, test, test > 0) for part, test in zip(parts, tests, strict=True)]
     folds_tested = [fold for fold in folds_tested if fold[2].any()]
     challengers = _fold_fits(

@@ -369,6 +369,31 @@ def test_the_cross_validated_gain_by_hand(space: RoadSpace, power: float, speed:
     assert decisions == {True, False}
 
 
+def fitted_to_first_half(
+    space: RoadSpace, seed: int
+) -> tuple[list[NetPosition], list[NetPosition]]:
+    """A reservoir of 60 targets and the best pair of references for its first 30, by
+    enumeration."""
+    _, reservoir = demand_stream(seed, 60)
+    half = reservoir[:30]
+    sites = sites_of(space, half, poor_start(2), [])
+    _, rows = brute_force(service_costs(space, sites, half, 1.0), 2)
+    return reservoir, [sites[i] for i in rows]
+
+
+def refit_of_half(
+    space: RoadSpace,
+    start: Sequence[NetPosition],
+    reservoir: Sequence[NetPosition],
+    **choices: Any,
+) -> Consolidation[NetPosition]:
+    """A consolidation of ``reservoir`` from ``start``, its last 30 targets fresh."""
+    return consolidate(
+        space, start, start, reservoir, power=1.0, speed=1.0, confidence=0.0,
+        updates=[1, 1], fresh=30, **choices,
+    )  # fmt: skip
+
+
 def test_a_refit_is_taken_unless_it_tests_worse_by_more_than_one_standard_error(
     space: RoadSpace,
 ) -> None:
@@ -377,26 +402,9 @@ def test_a_refit_is_taken_unless_it_tests_worse_by_more_than_one_standard_error(
     # error) and a little better, and check both decisions with and without refit
     seen = set()
     for seed in range(40):
-        _, reservoir = demand_stream(seed, 60)
-        half = reservoir[:30]
-        sites = sites_of(space, half, poor_start(2), [])
-        costs = service_costs(space, sites, half, 1.0)
-        _, rows = brute_force(costs, 2)
-        start = [sites[i] for i in rows]
+        reservoir, start = fitted_to_first_half(space, seed)
         plain, refit = (
-            consolidate(
-                space,
-                start,
-                start,
-                reservoir,
-                power=1.0,
-                speed=1.0,
-                confidence=0.0,
-                updates=[1, 1],
-                fresh=30,
-                refit=flag,
-            )
-            for flag in (False, True)
+            refit_of_half(space, start, reservoir, refit=flag) for flag in (False, True)
         )
         assert plain.gain == refit.gain and plain.standard_error == refit.standard_error
         if 0.0 < plain.gain <= plain.standard_error:
@@ -421,26 +429,9 @@ def test_an_untested_refit_takes_the_fit_of_the_whole_reservoir(space: RoadSpace
     # turns it down or takes it, and no fold is solved
     turned_down = 0
     for seed in range(40):
-        _, reservoir = demand_stream(seed, 60)
-        half = reservoir[:30]
-        sites = sites_of(space, half, poor_start(2), [])
-        _, rows = brute_force(service_costs(space, sites, half, 1.0), 2)
-        start = [sites[i] for i in rows]
+        reservoir, start = fitted_to_first_half(space, seed)
         tested, untested = (
-            consolidate(
-                space,
-                start,
-                start,
-                reservoir,
-                power=1.0,
-                speed=1.0,
-                confidence=0.0,
-                updates=[1, 1],
-                fresh=30,
-                refit=True,
-                tested_refit=flag,
-                shakes=20,
-            )
+            refit_of_half(space, start, reservoir, refit=True, tested_refit=flag, shakes=20)
             for flag in (True, False)
         )
         turned_down += not tested.accepted
