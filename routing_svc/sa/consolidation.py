@@ -152,7 +152,7 @@ class ConsolidationPolicy:
         optimum is kept.
     """
 
-    reservoir: int = 8000
+    reservoir: int = 4000
     first: int = 250
     growth: float = 1.1
     longest: int = 4000

@@ -717,7 +717,7 @@ def test_consolidate_rejects_mismatched_inputs(space: RoadSpace) -> None:
         {"first": 0},
         {"longest": -5},
         {"block": 1},
-        {"block": 9000},  # larger than the reservoir of 8000
+        {"block": 5000},  # larger than the reservoir of 4000
         {"growth": 1.0},
         {"growth": math.nan},
         {"growth": math.inf},
@@ -915,7 +915,7 @@ def small_calm(**changes: Any) -> ConsolidationPolicy:
 def test_policy_defaults() -> None:
     policy = ConsolidationPolicy()
     # the values docs/learning.md states
-    assert (policy.reservoir, policy.first, policy.longest, policy.block) == (8000, 250, 4000, 250)
+    assert (policy.reservoir, policy.first, policy.longest, policy.block) == (4000, 250, 4000, 250)
     assert (policy.growth, policy.folds, policy.confidence, policy.shift_ratio) == (
         1.1,
         4,
