@@ -9,10 +9,9 @@ Two questions of the learning rules of :mod:`routing_svc.sa.held_step` and
   the junction; a reference that moves past it gives them up, which is where
   the expected cost ``J`` jumps. It also names the direction a target pulls.
 - :func:`candidate_references`: the positions a consolidation may open, the
-  targets of the sample where their edge is observed more than once, the ends
-  of their edges (Hakimi's demand points plus vertices, see
-  :mod:`routing_svc.optimum.candidates`) and the junctions they start from,
-  with the given positions first.
+  targets of the sample and the ends of their edges (Hakimi's demand points
+  plus vertices, see :mod:`routing_svc.optimum.candidates`), with the given
+  positions first.
 """
 
 from __future__ import annotations
@@ -63,27 +62,12 @@ def candidate_references(
     sample: Sequence[NetPosition],
     fixed: Sequence[NetPosition],
 ) -> list[NetPosition]:
-    """``fixed`` (in order), then the sample's targets on edges it observes twice or more,
-    the ends of the sample's edges and the ends of the edges leading into them.
+    """``fixed`` (in order), then the targets of ``sample`` and the ends of their edges.
 
-    Without repeats; ``sample`` lists each observation (a target may repeat). The
-    demand points and the edge ends contain an optimal p-median of the sample
-    (:mod:`routing_svc.optimum.candidates`), but a site at a target is taken for the
-    sample's gap just behind it: where its edge holds one observation, that gap is
-    noise, and the junction the edge starts from (the end of each edge leading into
-    it) serves the same targets without the bias. Where an edge holds several, their
-    offsets say where along it the demand lies. ``fixed`` (the current references)
-    lets a solver start from where the fleet is.
+    Without repeats. The demand points and the edge ends contain an optimal
+    p-median of the sample (:mod:`routing_svc.optimum.candidates`); ``fixed``
+    (the current references) lets a solver start from where the fleet is.
     """
-    observed = np.fromiter((z.edge for z in sample), dtype=np.int64, count=len(sample))
-    edges, counts = np.unique(observed, return_counts=True)
-    shared = set(edges[counts >= 2].tolist())
-    into = [
-        network.rev_indices[network.rev_indptr[e] : network.rev_indptr[e + 1]].tolist()
-        for e in edges.tolist()
-    ]
-    ends = [
-        NetPosition(e, float(network.length[e]))
-        for e in dict.fromkeys([*edges.tolist(), *(q for qs in into for q in qs)])
-    ]
-    return list(dict.fromkeys([*fixed, *(z for z in sample if z.edge in shared), *ends]))
+    edges = np.unique(np.fromiter((z.edge for z in sample), dtype=np.int64, count=len(sample)))
+    ends = [NetPosition(int(e), float(network.length[e])) for e in edges.tolist()]
+    return list(dict.fromkeys([*fixed, *sample, *ends]))

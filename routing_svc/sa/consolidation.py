@@ -9,10 +9,8 @@ reservoir of its most recent targets ``z_1 .. z_m``:
 .. math:: \\min_{S, |S| = p} \\sum_j c\\bigl(\\min_{s \\in S} d(s, z_j)\\bigr),
 
 objective (11) of Le Ny & Pappas on the empirical distribution, over the
-candidate references of the sample (Hakimi's finite dominating set, its targets
-and the ends of their edges, less the targets alone on their edge, whose offsets
-fit noise, plus the junctions the edges start from; at most
-:data:`MAX_SITE_TARGETS` of its targets, :meth:`SampleSpace.candidate_references`)
+candidate references of the sample (its targets and the ends of their edges,
+Hakimi's finite dominating set; at most :data:`MAX_SITE_TARGETS` of its targets)
 by greedy addition and Whitaker's fast
 interchange (:mod:`routing_svc.sa.interchange`), started from the current
 references, from the last accepted ones and from scratch; the solve that is taken
@@ -71,8 +69,7 @@ from routing_svc.sa.stands import StandSet, capacitated_sites, open_count, stand
 from routing_svc.types import FloatArray, IntArray
 
 MAX_SITE_TARGETS = 600
-"""Distinct reservoir targets whose candidate references are offered (the targets, the
-ends of their edges and the junctions before);
+"""Reservoir targets offered as candidate references (with the ends of their edges);
 beyond, an evenly spaced subset of the distinct targets, so that a consolidation's cost
 is bounded whatever the spread of the demand."""
 
@@ -413,8 +410,7 @@ class SampleSpace(Protocol[P]):
     """What a consolidation needs of a space: candidates and a cost matrix."""
 
     def candidate_references(self, sample: Sequence[P], fixed: Sequence[P]) -> list[P]:
-        """``fixed`` first, then candidate references for ``sample`` (each observation,
-        a target may repeat), without repeats."""
+        """``fixed`` first, then candidate references for ``sample``, without repeats."""
         ...
 
     def cost_matrix(self, sources: list[P], targets: list[P]) -> FloatArray:
@@ -497,10 +493,7 @@ def consolidate(
     first_fresh = len(reservoir) - min(max(fresh, 0), len(reservoir))
     if stands is None:
         stride = -(-len(targets) // MAX_SITE_TARGETS)
-        observed = [
-            targets[j] for j in range(0, len(targets), stride) for _ in range(int(weight[j]))
-        ]
-        sites = space.candidate_references(observed, [*positions, *anchor])
+        sites = space.candidate_references(targets[::stride], [*positions, *anchor])
         row = {s: i for i, s in enumerate(sites)}
         actual = np.array([row[x] for x in positions], dtype=np.int64)
         current = _distinct(actual, len(sites))
