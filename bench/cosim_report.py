@@ -45,7 +45,7 @@ SHARED = ROOT.parent / "shared" / "nets"
 BADHERSFELD = SHARED / "badhersfeld.net.xml.gz"
 BUILDINGS = SHARED / "badhersfeld.buildings.csv"
 FIGURES = ROOT / "docs" / "figures" / "cosim"
-POLICIES = "sa,sa-available,optimum,sumo-stop,sumo-taxistand"
+POLICIES = "sa,sa-available,optimum,sumo-stop,sumo-closest,sumo-taxistand"
 
 #: The goals: (name, statistic, baseline policy, largest ratio of the policy's to the baseline's).
 GOALS = (
@@ -346,10 +346,15 @@ summaries: `docs/figures/cosim/report.json`.
     change SUMO makes to the service (`POST .../vehicles/state:batch`, one batch per
     simulation step): `busy` at dispatch, `available` with the current position at the
     drop-off, the positions of available vehicles that drive to their posts (every 30 s
-    while they move). An answer `queued` (nobody available) puts the request in a FIFO
-    queue; at each drop-off the queue is served first, oldest first, asking
-    `POST .../assign` again (read-only). Idle vehicles wait at the posts the service
-    names (`GET .../posts`, asked again whenever a vehicle turns busy or available or a
+    while they move). An answer `queued` (nobody available) puts the request in a
+    queue; at each drop-off the queue is served first, asking `POST .../assign` again
+    (read-only) for every waiting request: the freed vehicle goes to the one the service
+    says it reaches soonest, except that a request waiting 900 s or more (the largest
+    service-level threshold) goes first, oldest first (`--queue soonest`, the
+    co-simulation's default; `--queue fifo` serves the oldest). Serving the nearest
+    request first shortens the empty drives, so a saturated fleet serves more requests
+    an hour. Idle vehicles wait at the posts the service names (`GET .../posts`, asked
+    again whenever a vehicle turns busy or available or a
     reference moves): with `k` vehicles available, the `k` references that serve the
     recent targets best, held by the available vehicles at the least total travel time
     (move-up; with every vehicle available, all the references). An idle vehicle whose
@@ -372,8 +377,13 @@ summaries: `docs/figures/cosim/report.json`.
     traffic as the run, apart from the ones served: an estimate of the incident
     distribution, where a p-median of the served incidents themselves would place the
     vehicles with hindsight).
-  - `sumo-stop`: SUMO's taxi device alone, `greedy` dispatch every second, idle taxis stop
-    where they dropped their customer.
+  - `sumo-stop`: SUMO's taxi device alone, `greedy` dispatch every second (reservations
+    oldest first, each to the closest idle taxi), idle taxis stop where they dropped their
+    customer.
+  - `sumo-closest`: the same with SUMO's `greedyClosest` dispatch, which serves the
+    reservation with the shortest travel time to pick-up first: SUMO's own counterpart
+    of the queue order above, to show what the positions add beyond it. The goals
+    compare with `sumo-stop`, as the issue sets them.
   - `sumo-taxistand`: SUMO's taxi device alone, `greedy` dispatch, idle algorithm
     `taxistand`: one stand (a `parkingArea` in an additional file, listed by the rerouter
     that `device.taxi.stands-rerouter` names) at each of `optimum`'s sites, where the taxis
@@ -397,7 +407,7 @@ python bench/cosim_report.py                                  # everything, 3 se
 python bench/cosim_report.py --seeds 0 --only drt-persons-10  # a part
 python bench/cosim_report.py --seeds 0 --hours 1 --render-only  # this document from the runs
 routing-svc cosim --net drt --vehicles 10 --hours 2 --seeds 0,1,2 --history 1000 \\
-    --policies sa,sa-available,optimum,sumo-stop,sumo-taxistand
+    --policies sa,sa-available,optimum,sumo-stop,sumo-closest,sumo-taxistand
 ```
 {missing}
 ## Headline: mean SUMO-measured wait (s), mean of the seeds
@@ -422,12 +432,13 @@ restricting `sa` to stands costs about 15-20 % of wait against free positions in
 seed, more than the optimum itself loses (the expected free-flow wait of the optimum over
 the stands, 83.6 s, is 1.07 x the free optimum's 77.8 s). Measured once (seed 0, 10
 vehicles, 1 h of persons at 40/h, background 3 vehicles/h/km), with and without the
-last option:
+last option, with the queue served oldest first (`--queue fifo`, the co-simulation's only
+order when this was measured):
 
 ```
 routing-svc cosim --net ../shared/nets/badhersfeld.net.xml.gz --mode persons --vehicles 10 \\
     --hours 1 --rate 40 --density 3 --policies sa --seeds 0 --workers 1 --no-plots \\
-    [--stands ../shared/nets/badhersfeld.parking.add.xml]
+    --queue fifo [--stands ../shared/nets/badhersfeld.parking.add.xml]
 ```
 
 | `sa` | mean wait (s) | p90 wait (s) | served | unparked |
@@ -452,12 +463,14 @@ The same defaults on three networks the report does not cover: Bologna
 OpenStreetMap extract (`routing-svc import-osm ../shared/nets/badhersfeld.osm.xml.gz -o
 bhosm.net.xml.gz`) and `bs3d` (the Braunschweig network of SUMO's game,
 `tools/game/bs3d`, `--net bs3d`), 3 seeds, 1 h of requests at 40/h, background 3
-vehicles/h/km, a history of 1,000, idle vehicles at the service's posts (measured with
-their own commands, not this report's runs; 2026-12-01):
+vehicles/h/km, a history of 1,000, idle vehicles at the service's posts, the queue served
+oldest first (`--queue fifo`, the co-simulation's only order then; measured with their
+own commands, not this report's runs; 2026-12-01):
 
 ```
 routing-svc cosim --net NET --mode MODE --vehicles N --hours 1 --rate 40 --density 3 \\
-    --seeds 0,1,2 --history 1000 --policies sa,optimum,sumo-stop --workers 1 --no-plots
+    --seeds 0,1,2 --history 1000 --policies sa,optimum,sumo-stop --workers 1 --no-plots \\
+    --queue fifo
 ```
 
 | experiment | busy | `sa` mean / p90 (s) | `sumo-stop` | `optimum` | ratios |

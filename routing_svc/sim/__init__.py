@@ -7,7 +7,7 @@
         prepare.py    background traffic (randomTrips), requests, starts, optimum
         run.py        one policy in one SUMO process -> PolicyRun (waits from SUMO)
         dispatcher.py reservations -> fleet service's dispatch -> dispatchTaxi; vehicle
-                      states back to the service; FIFO queue; park at reference
+                      states back to the service; the queue; park at reference
         backend.py    SimBackend: LibsumoBackend (lazy libsumo), TraciBackend (GUI)
         measures.py   SUMO's tripinfo/personinfo -> waits, service levels, empty km, load
     write_figures(result, out_dir=..., prefix=...)  (plots.py)

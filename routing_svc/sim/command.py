@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from routing_svc.errors import InvalidInput
+from routing_svc.sim.dispatcher import QUEUE_ORDERS
 from routing_svc.sim.spec import DEFAULT_INCIDENT_SAMPLE
 
 __all__ = ["add_parser", "parse_seeds", "run"]
@@ -93,7 +94,7 @@ def add_parser(subparsers: Any) -> None:
         "--policies",
         default=None,
         help="comma list (default: sa,sa-available,optimum,sumo-stop,sumo-taxistand; "
-        "also sa-cold, sa-floor, static, sumo-circling)",
+        "also sa-cold, sa-floor, static, sumo-closest, sumo-circling)",
     )
     p.add_argument(
         "--stands",
@@ -108,6 +109,13 @@ def add_parser(subparsers: Any) -> None:
         default=True,
         help="idle vehicles wait at the service's posts (GET .../posts, default), or at their "
         "own references (--no-move-up)",
+    )
+    p.add_argument(
+        "--queue",
+        choices=QUEUE_ORDERS,
+        default="soonest",
+        help="which waiting request the service's vehicles serve next: the one they reach "
+        "soonest, overdue ones (past 900 s) first (default), or the oldest (fifo)",
     )
     p.add_argument("--seeds", type=parse_seeds, default=(0,), help="comma list of seeds")
     p.add_argument("--workers", type=int, default=2, help="parallel SUMO processes")
@@ -166,6 +174,7 @@ def run(args: argparse.Namespace) -> int:
         rule=args.rule,
         stands=None if args.stands is None else str(args.stands),
         move_up=args.move_up,
+        queue_order=args.queue,
     )
     result = run_cosim(spec, out_dir=args.out, progress=not args.quiet, resume=args.resume)
     if not args.no_plots:

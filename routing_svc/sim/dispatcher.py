@@ -16,13 +16,16 @@ After every simulation step, :meth:`FleetDispatcher.on_step`:
 1. pushes SUMO's current edge travel times every ``traffic_period`` seconds
    (``PUT .../traveltimes``), if asked to;
 2. reports the vehicles that dropped their customer off as available and
-   serves the waiting requests first, oldest first, asking ``/assign`` again
-   (read-only) for each: the request was already learnt from when it came;
+   serves the waiting requests first, asking ``/assign`` again (read-only)
+   for each (the request was already learnt from when it came): with
+   ``queue_order="soonest"`` (default) first the oldest of those that waited
+   past the reports' largest service-level threshold, else the one the
+   vehicles named reach soonest; with ``"fifo"`` the oldest;
 3. asks the service about each new reservation: ``POST .../targets`` (the
    SA learns from it; ``sa`` policies) or ``POST .../assign`` (frozen
    references; ``static``, ``optimum``). A ``dispatched`` answer sends the
-   vehicle it names; ``queued`` (nobody available) puts the request in a
-   FIFO queue; ``partial`` sends the vehicles named (the first carries the
+   vehicle it names; ``queued`` (nobody available) puts the request in the
+   queue; ``partial`` sends the vehicles named (the first carries the
    customer, the others drive to the pick-up and wait with it) and queues
    the rest;
 4. with ``move_up``, whenever a vehicle became busy or available or a reference
@@ -57,6 +60,10 @@ from routing_svc.sim.backend import (
     SimBackend,
     SimulationError,
 )
+from routing_svc.sim.measures import DEFAULT_THRESHOLDS
+
+#: How waiting requests are served when vehicles become available (:class:`FleetDispatcher`).
+QUEUE_ORDERS = ("soonest", "fifo")
 
 __all__ = ["DispatchLog", "FleetDispatcher", "Snapshot", "Waiting", "stand_homes"]
 
@@ -79,7 +86,7 @@ class Snapshot:
 
 @dataclass(slots=True)
 class Waiting:
-    """A request that waits for vehicles (FIFO).
+    """A request that waits for vehicles.
 
     ``requires`` is what is still missing (``None``: any one vehicle);
     ``carrier`` the vehicle already sent that carries the customer, if any;
@@ -199,6 +206,11 @@ class FleetDispatcher:
     move_up : bool
         Idle vehicles wait at the posts the service names (``GET .../posts``)
         instead of their own references; not with ``stands``.
+    queue_order : {"soonest", "fifo"}
+        Which waiting request available vehicles serve next (:meth:`_next_waiting`).
+    overdue_after : float
+        ``soonest``: seconds after which a waiting request goes before the others
+        (the reports' largest service-level threshold).
     """
 
     def __init__(
@@ -216,7 +228,13 @@ class FleetDispatcher:
         position_period: float = 30.0,
         stands: Sequence[Stand] | None = None,
         move_up: bool = False,
+        queue_order: str = "soonest",
+        overdue_after: float = max(DEFAULT_THRESHOLDS),
     ) -> None:
+        if queue_order not in QUEUE_ORDERS:
+            raise ValueError(f"queue_order must be one of {QUEUE_ORDERS}, not {queue_order!r}")
+        self.queue_order = queue_order
+        self.overdue_after = overdue_after
         self.backend = backend
         self.client = client
         self.fleet_id = fleet_id
@@ -387,17 +405,45 @@ class FleetDispatcher:
             self.queue.append(waiting)
 
     def _serve_queue(self) -> None:
-        """Serve waiting requests, oldest first, while the service names vehicles for them."""
+        """Serve waiting requests, one at a time (:meth:`_next_waiting`), while the service
+        names vehicles for them."""
         while self.queue:
-            waiting = self.queue[0]
-            answer = self._ask(waiting.reservation, waiting.requires, learn=False)
-            if answer["dispatch"]["status"] == "queued":
+            chosen = self._next_waiting()
+            if chosen is None:
                 return
-            self.queue.popleft()
-            if not self._serve(waiting, answer["dispatch"]):
+            waiting, dispatch = chosen
+            self.queue.remove(waiting)
+            if not self._serve(waiting, dispatch):
                 self.queue.appendleft(waiting)
                 return
             self.log.from_queue.append(waiting.reservation.person)
+
+    def _next_waiting(self) -> tuple[Waiting, Mapping[str, Any]] | None:
+        """The waiting request to serve next and the service's dispatch for it (``None``:
+        the service names nobody).
+
+        ``fifo``: the head of the queue (the oldest; a request whose dispatch failed
+        goes back to the head). ``soonest``: the head if it waited
+        :attr:`overdue_after` seconds or more; else, of the requests the service names
+        vehicles for, the one they reach soonest (the largest ``cost`` among its
+        dispatched vehicles; ties to the older). Serving the closest request first
+        shortens the empty drives, so the fleet serves more requests an hour when
+        it is saturated; the overdue rule bounds how long a far request waits.
+        """
+        head = self.queue[0]
+        overdue = self.backend.time() - head.reservation.time >= self.overdue_after
+        if self.queue_order == "fifo" or overdue:
+            dispatch = self._ask(head.reservation, head.requires, learn=False)["dispatch"]
+            return None if dispatch["status"] == "queued" else (head, dispatch)
+        best: tuple[float, Waiting, Mapping[str, Any]] | None = None
+        for waiting in self.queue:
+            dispatch = self._ask(waiting.reservation, waiting.requires, learn=False)["dispatch"]
+            if dispatch["status"] == "queued":
+                continue
+            arrival = max(float(v["cost"]) for v in dispatch["vehicles"])
+            if best is None or arrival < best[0]:
+                best = (arrival, waiting, dispatch)
+        return None if best is None else (best[1], best[2])
 
     def _serve(self, waiting: Waiting, dispatch: Mapping[str, Any]) -> bool:
         """Send the vehicles a dispatch answer names; whether the request is complete.

@@ -140,6 +140,7 @@ def _jobs(spec: CosimSpec, prepared: Prepared, *, progress: bool, resume: bool) 
                     stands=prepared.stands.usable if prepared.stands is not None else (),
                     stands_file=None if spec.stands is None else Path(spec.stands).resolve(),
                     move_up=spec.move_up,
+                    queue_order=spec.queue_order,
                     progress=progress and (single or spec.gui),
                     resume=resume,
                 )

@@ -336,9 +336,9 @@ def sumo_options(
 
     Parameters
     ----------
-    dispatch : {"traci", "greedy"}
-        ``traci``: the co-simulation dispatches; ``greedy``: SUMO's taxi device
-        does, every second.
+    dispatch : {"traci", "greedy", "greedyClosest"}
+        ``traci``: the co-simulation dispatches; otherwise SUMO's taxi device
+        does, every second, with that algorithm.
     idle : {"stop", "randomCircling", "taxistand"}
         What SUMO's taxi device does with an idle taxi.
     additional : sequence of Path

@@ -33,6 +33,7 @@ _COLOURS = {
     "static": "tab:gray",
     "optimum": "tab:green",
     "sumo-stop": "tab:red",
+    "sumo-closest": "tab:pink",
     "sumo-circling": "tab:orange",
     "sumo-taxistand": "tab:brown",
 }

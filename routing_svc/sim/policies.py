@@ -21,6 +21,9 @@
                     the same traffic apart from the requests served.
 ``sumo-stop``       SUMO's taxi device: ``greedy`` dispatch, idle taxis stop
                     where they are.
+``sumo-closest``    SUMO's taxi device: ``greedyClosest`` dispatch (the
+                    reservation with the shortest travel time to pick-up
+                    first), idle taxis stop where they are.
 ``sumo-circling``   SUMO's taxi device: ``greedy`` dispatch, idle taxis drive
                     around at random (``randomCircling``).
 ``sumo-taxistand``  SUMO's taxi device: ``greedy`` dispatch, idle taxis drive
@@ -53,7 +56,7 @@ class Policy:
         The policy's name in reports.
     dispatch : {"service", "sumo"}
         ``service``: the co-simulation asks the fleet service (SUMO's taxi
-        dispatch algorithm ``traci``); ``sumo``: SUMO's ``greedy`` dispatcher.
+        dispatch algorithm ``traci``); ``sumo``: SUMO's dispatcher ``algorithm``.
     learn : bool
         Whether each request updates the reference positions (SA).
     positions : {"start", "optimum"}
@@ -66,6 +69,8 @@ class Policy:
         Whether the fleet starts at the p-median of the historical requests.
     learning_vehicles : {"all", "available"}
         The fleet's ``learning_vehicles`` option (whose reference learns).
+    algorithm : {"greedy", "greedyClosest"}
+        SUMO's taxi dispatch algorithm for ``sumo``.
     """
 
     name: str
@@ -76,6 +81,7 @@ class Policy:
     floor: bool = False
     history: bool = False
     learning_vehicles: Literal["all", "available"] = "all"
+    algorithm: Literal["greedy", "greedyClosest"] = "greedy"
 
     @property
     def uses_stands(self) -> bool:
@@ -94,6 +100,7 @@ POLICIES: dict[str, Policy] = {
         Policy("static", "service"),
         Policy("optimum", "service", positions="optimum"),
         Policy("sumo-stop", "sumo", idle="stop"),
+        Policy("sumo-closest", "sumo", idle="stop", algorithm="greedyClosest"),
         Policy("sumo-circling", "sumo", idle="randomCircling"),
         Policy("sumo-taxistand", "sumo", idle="taxistand", positions="optimum"),
     )

@@ -114,6 +114,8 @@ class PolicyJob:
         The usable stands of ``stands_file`` (parkingAreas).
     move_up : bool
         Idle vehicles wait at the service's posts (``GET .../posts``).
+    queue_order : str
+        Which waiting request is served next (:class:`~routing_svc.sim.dispatcher.FleetDispatcher`).
     stands_file : Path, optional
         A SUMO additional file with those parkingAreas: a policy that
         :attr:`~routing_svc.sim.policies.Policy.uses_stands` waits at them
@@ -143,6 +145,7 @@ class PolicyJob:
     stands: tuple[Stand, ...] = ()
     stands_file: Path | None = None
     move_up: bool = False
+    queue_order: str = "soonest"
 
     @property
     def at_stands(self) -> bool:
@@ -329,7 +332,7 @@ def run_policy(job: PolicyJob) -> PolicyRun:
             end=job.end,
             seed=job.seed,
             tripinfo=tripinfo,
-            dispatch="traci" if by_service else "greedy",
+            dispatch="traci" if by_service else job.policy.algorithm,
             idle=job.policy.idle,
             additional=additional,
             stops=job.workdir / f"stops-{name}.xml" if job.at_stands else None,
@@ -349,6 +352,7 @@ def run_policy(job: PolicyJob) -> PolicyRun:
                 snapshot_period=job.snapshot_period,
                 stands=job.stands if job.at_stands else None,
                 move_up=job.move_up,
+                queue_order=job.queue_order,
             )
 
         def step_once() -> float:

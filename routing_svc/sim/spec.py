@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from routing_svc.errors import InvalidInput
+from routing_svc.sim.dispatcher import QUEUE_ORDERS
 from routing_svc.sim.policies import DEFAULT_POLICIES, POLICIES, Policy
 
 __all__ = ["DEFAULT_INCIDENT_SAMPLE", "CosimSpec"]
@@ -87,6 +88,9 @@ class CosimSpec:
         The service's idle vehicles wait at the posts it names (``GET .../posts``)
         instead of their own references (every policy the service dispatches; not
         with ``stands``); ``False``: each at its own reference.
+    queue_order : {"soonest", "fifo"}
+        Which waiting request the service's vehicles serve next when they become
+        available (:meth:`routing_svc.sim.dispatcher.FleetDispatcher._next_waiting`).
     """
 
     network: str
@@ -115,12 +119,15 @@ class CosimSpec:
     rule: str | None = None
     stands: str | None = None
     move_up: bool = True
+    queue_order: str = "soonest"
 
     def __post_init__(self) -> None:
         if self.mode not in ("persons", "incidents"):
             raise InvalidInput(f"mode must be 'persons' or 'incidents', got {self.mode!r}")
         if self.vehicles < 1 or not self.seeds or not self.policies or self.workers < 1:
             raise InvalidInput("need >= 1 vehicle, seed, policy and worker")
+        if self.queue_order not in QUEUE_ORDERS:
+            raise InvalidInput(f"queue_order must be one of {QUEUE_ORDERS}: {self.queue_order!r}")
         if self.history < 0:
             raise InvalidInput("history must be >= 0")
         if self.incident_sample < 1:

@@ -21,7 +21,9 @@ import pytest
 from routing_svc.network.catalogue import resolve_network
 from routing_svc.sim import CosimResult, CosimSpec, parse_policies, run_cosim
 
-ALL_POLICIES = "sa,sa-available,sa-cold,static,optimum,sumo-stop,sumo-circling,sumo-taxistand"
+ALL_POLICIES = (
+    "sa,sa-available,sa-cold,static,optimum,sumo-stop,sumo-closest,sumo-circling,sumo-taxistand"
+)
 
 
 @pytest.fixture(scope="session")

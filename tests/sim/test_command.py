@@ -91,3 +91,18 @@ def test_an_incident_sample_below_one_is_refused_before_anything_runs(
     with pytest.raises(InvalidInput, match="incident_sample"):
         args.run(args)
     assert not out.exists()
+
+
+def test_the_queue_order_is_an_option_and_a_bad_one_is_refused(
+    grid_net: Path, tmp_path: Path
+) -> None:
+    from routing_svc.errors import InvalidInput
+    from routing_svc.sim.spec import CosimSpec
+
+    assert _parse(["--net", str(grid_net)]).queue == "soonest"
+    assert _parse(["--net", str(grid_net), "--queue", "fifo"]).queue == "fifo"
+    with pytest.raises(SystemExit):
+        _parse(["--net", str(grid_net), "--queue", "random"])
+    with pytest.raises(InvalidInput, match="queue_order"):
+        CosimSpec(network=str(grid_net), queue_order="random")
+    assert CosimSpec(network=str(grid_net)).to_dict()["queue_order"] == "soonest"

@@ -98,7 +98,14 @@ def cosim(drt: Path, tmp_path: Path) -> Iterator[Any]:
     """A function that runs the dispatcher in SUMO on DRT and checks states every step."""
     clients: list[RecordingClient] = []
 
-    def run(vehicles: int, requests: Sequence[tuple[float, int]], *, seed: int, end: float) -> Run:
+    def run(
+        vehicles: int,
+        requests: Sequence[tuple[float, int]],
+        *,
+        seed: int,
+        end: float,
+        queue_order: str = "soonest",
+    ) -> Run:
         edges = _edges(drt, vehicles + len(requests) + 1, seed=seed)
         fleet = [FleetVehicle(f"fleet{i}", e, length / 2) for i, (e, length) in enumerate(edges)]
         fleet = fleet[:vehicles]
@@ -133,7 +140,12 @@ def cosim(drt: Path, tmp_path: Path) -> Iterator[Any]:
             )
         )
         dispatcher = FleetDispatcher(
-            backend, client, "f", learn=True, edge_lengths=_network_lengths(drt)
+            backend,
+            client,
+            "f",
+            learn=True,
+            edge_lengths=_network_lengths(drt),
+            queue_order=queue_order,
         )
         load = FleetLoad([v.id for v in fleet], since=0.0, until=end)
         seen: dict[str, str] = {}
@@ -196,7 +208,8 @@ def test_sumo_sends_the_vehicle_the_dispatch_answer_names(cosim: Any) -> None:
 
 
 def test_queued_requests_are_served_in_fifo_order(cosim: Any) -> None:
-    run: Run = cosim(1, [(10.0, 0), (11.0, 1), (12.0, 2), (13.0, 3)], seed=5, end=4000.0)
+    requests = [(10.0, 0), (11.0, 1), (12.0, 2), (13.0, 3)]
+    run: Run = cosim(1, requests, seed=5, end=4000.0, queue_order="fifo")
     kinds = [(kind, answer["status"]) for kind, _, answer in run.client.answers]
     assert kinds[:4] == [("target", "dispatched")] + [("target", "queued")] * 3
     assert run.dispatcher.log.queued == 3
@@ -208,6 +221,32 @@ def test_queued_requests_are_served_in_fifo_order(cosim: Any) -> None:
     sent = [s for _, _, s in run.dispatcher.log.state_changes]
     collapsed = [s for n, s in enumerate(sent) if n == 0 or sent[n - 1] != s]
     assert collapsed == ["busy", "available"] * 4
+
+
+def test_a_freed_vehicle_takes_the_waiting_request_the_service_prices_soonest(
+    cosim: Any,
+) -> None:
+    requests = [(10.0 + n, n) for n in range(5)]
+    run: Run = cosim(1, requests, seed=5, end=6000.0)
+    targets = [(edge, answer) for kind, edge, answer in run.client.answers if kind == "target"]
+    edge_of = {f"p{n}": edge for n, (edge, _) in enumerate(targets)}
+    assert [a["status"] for _, a in targets] == ["dispatched"] + ["queued"] * 4
+    # each drop-off asks the service about every waiting request (a round), and sends
+    # the vehicle to the one it names the least cost for
+    rounds: list[list[tuple[str, float]]] = [[]]
+    for kind, edge, answer in run.client.answers:
+        if kind == "assign" and answer["status"] == "dispatched":
+            rounds[-1].append((edge, float(answer["vehicles"][0]["cost"])))
+        elif rounds[-1]:
+            rounds.append([])
+    rounds = [r for r in rounds if r]
+    chosen = [min(r, key=lambda priced: priced[1])[0] for r in rounds]
+    assert chosen == [edge_of[p] for p in run.dispatcher.log.from_queue]
+    assert sorted(run.dispatcher.log.from_queue) == ["p1", "p2", "p3", "p4"]
+    assert run.dispatcher.log.from_queue != ["p1", "p2", "p3", "p4"]  # not the FIFO order
+    assert max(len(r) for r in rounds) == 4
+    rides = _rides(run.tripinfo)
+    assert {v for _, _, v in rides.values()} == {"fleet0"} and len(rides) == 5
 
 
 def test_metrics_of_a_small_recorded_run_by_hand(cosim: Any) -> None:

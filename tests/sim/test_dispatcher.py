@@ -84,6 +84,49 @@ def test_queued_requests_are_served_first_in_order_then_vehicles_go_home(
     assert ("v0", "busy") in [(v, s) for _, v, s in dispatcher.log.state_changes]
 
 
+@pytest.mark.parametrize(
+    ("queue_order", "overdue_after", "served"),
+    [
+        # v0, free at C3C4 at 101, takes r4 next door although r3 came first
+        ("soonest", 900.0, [(101, "v0", "r4"), (102, "v1", "r3")]),
+        # r3 has waited 98 s at 101: past a limit of 90 s it goes first
+        ("soonest", 90.0, [(101, "v0", "r3"), (102, "v1", "r4")]),
+        ("fifo", 900.0, [(101, "v0", "r3"), (102, "v1", "r4")]),
+    ],
+)
+def test_a_freed_vehicle_serves_the_waiting_request_the_queue_order_names(
+    client: InProcessFleetClient,
+    queue_order: str,
+    overdue_after: float,
+    served: list[tuple[float, str, str]],
+) -> None:
+    # both vehicles busy until 101 and 102, then idle at C3C4 (the fake's drop-off);
+    # r3 waits at A0A1, far from C3C4, r4 at C4C5, which starts where C3C4 ends
+    reservations = [
+        _reservation(1, 1.0, "A1A2"),
+        _reservation(2, 2.0, "A1A2"),
+        _reservation(3, 3.0, "A0A1"),
+        _reservation(4, 4.0, "C4C5"),
+    ]
+    backend = FakeBackend(
+        positions={"v0": "A0A1", "v1": "F5F4"}, reservations=reservations, service_seconds=100.0
+    )
+    dispatcher = FleetDispatcher(
+        backend, client, "f", learn=False, queue_order=queue_order, overdue_after=overdue_after
+    )
+    _run(backend, dispatcher, 150)
+    sent = [(d.time, d.vehicle, d.reservation) for d in backend.dispatches]
+    assert sent == [(1, "v0", "r1"), (2, "v1", "r2"), *served]
+    assert dispatcher.log.queued == 2 and not dispatcher.queue
+    assert dispatcher.log.from_queue == [f"p{r[-1]}" for _, _, r in served]
+
+
+def test_an_unknown_queue_order_is_refused(client: InProcessFleetClient) -> None:
+    backend = FakeBackend(positions={"v0": "A0A1", "v1": "F5F4"}, reservations=[])
+    with pytest.raises(ValueError, match="queue_order"):
+        FleetDispatcher(backend, client, "f", learn=False, queue_order="random")
+
+
 def test_sa_updates_move_the_reference_the_vehicle_returns_to(
     client: InProcessFleetClient,
 ) -> None:

@@ -11,7 +11,7 @@ from defusedxml import ElementTree
 from routing_svc.sim import CosimResult
 
 SERVICE_POLICIES = ("sa", "sa-available", "sa-cold", "static", "optimum")
-SUMO_POLICIES = ("sumo-stop", "sumo-circling", "sumo-taxistand")
+SUMO_POLICIES = ("sumo-stop", "sumo-closest", "sumo-circling", "sumo-taxistand")
 
 
 def _sumo_waits(tripinfo: Path) -> dict[str, tuple[float, str]]:
