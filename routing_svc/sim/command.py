@@ -35,6 +35,7 @@ from typing import Any
 
 from routing_svc.errors import InvalidInput
 from routing_svc.sim.dispatcher import QUEUE_ORDERS
+from routing_svc.sim.measures import DEFAULT_THRESHOLDS
 from routing_svc.sim.spec import DEFAULT_INCIDENT_SAMPLE
 
 __all__ = ["add_parser", "parse_seeds", "run"]
@@ -115,7 +116,8 @@ def add_parser(subparsers: Any) -> None:
         choices=QUEUE_ORDERS,
         default="soonest",
         help="which waiting request the service's vehicles serve next: the one they reach "
-        "soonest, overdue ones (past 900 s) first (default), or the oldest (fifo)",
+        f"soonest, overdue ones (past {max(DEFAULT_THRESHOLDS):g} s) first (default), "
+        "or the oldest (fifo)",
     )
     p.add_argument("--seeds", type=parse_seeds, default=(0,), help="comma list of seeds")
     p.add_argument("--workers", type=int, default=2, help="parallel SUMO processes")
