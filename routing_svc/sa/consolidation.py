@@ -696,8 +696,12 @@ def best_fit(costs: FloatArray, weight: FloatArray, starts: list[IntArray]) -> I
         s for k, s in enumerate(starts) if not any(np.array_equal(s, t) for t in starts[:k])
     ]
     seen, seen_weight = _weighed(costs, weight)
-    candidates = [fast_interchange(seen, seen_weight, s) for s in distinct]
-    candidates.append(fast_interchange(seen, seen_weight, greedy(seen, seen_weight, p)))
+    seen = np.ascontiguousarray(seen)
+    transposed = np.ascontiguousarray(seen.T)
+    candidates = [fast_interchange(seen, seen_weight, s, transposed=transposed) for s in distinct]
+    candidates.append(
+        fast_interchange(seen, seen_weight, greedy(seen, seen_weight, p), transposed=transposed)
+    )
     values = [_total(costs, weight, c) for c in candidates]
     return candidates[int(np.argmin(values))]
 

@@ -33,7 +33,14 @@ import math
 
 import numpy as np
 
-from routing_svc.sa.interchange_kernels import best_swap, lazy_greedy, nearest_two, relax_bounds
+from routing_svc.sa.interchange_kernels import (
+    best_swap,
+    fill_gains,
+    lazy_greedy,
+    nearest_two,
+    relax_bounds,
+    swap_losses,
+)
 from routing_svc.types import FloatArray, IntArray
 
 #: A swap must lower the objective by more than this fraction to be applied.
@@ -99,6 +106,8 @@ def neighbourhood_search(
     if largest == 0:
         return best
     rng = np.random.default_rng(seed)
+    c, w = _contiguous(c, w)
+    transposed = np.ascontiguousarray(c.T)
     value = _value(c, w, best)
     size, misses = 1, 0
     while misses < shakes_without_gain:
@@ -106,7 +115,7 @@ def neighbourhood_search(
         candidate[rng.choice(best.size, size=size, replace=False)] = rng.choice(
             np.setdiff1d(np.arange(c.shape[0]), best), size=size, replace=False
         )
-        candidate = fast_interchange(c, w, candidate)
+        candidate = fast_interchange(c, w, candidate, transposed=transposed)
         candidate_value = _value(c, w, candidate)
         if candidate_value < value * (1 - SWAP_TOLERANCE):
             best, value, size, misses = candidate, candidate_value, 1, 0
@@ -135,14 +144,20 @@ def greedy(c: FloatArray, w: FloatArray, p: int) -> IntArray:
     return np.sort(lazy_greedy(c, w, int(p)))
 
 
-def fast_interchange(c: FloatArray, w: FloatArray, sites: IntArray) -> IntArray:
+def fast_interchange(
+    c: FloatArray, w: FloatArray, sites: IntArray, *, transposed: FloatArray | None = None
+) -> IntArray:
     """Apply best-improvement swaps from ``sites`` until none lowers ``F``.
 
     Each pass (:func:`routing_svc.sa.interchange_kernels.best_swap`) finds the swap of
     least ``gain_i + loss_ir`` (the first in the order of closed sites, then of
     positions in ``sites``); it is applied if it lowers ``F`` by more than
     :data:`SWAP_TOLERANCE` of ``F`` and the exactly summed ``F`` of the result is lower.
-    The entering site takes the leaving one's position.
+    The entering site takes the leaving one's position. The losses of a site are summed
+    when it is first priced and then kept, each pass summing again only the positions
+    whose atoms changed (:func:`routing_svc.sa.interchange_kernels.swap_losses`), over
+    ``c`` transposed: ``transposed`` if given (``c.T``, C-contiguous, shared by several
+    calls on the same costs), else made at the first swap.
     """
     c, w = _contiguous(c, w)
     n, m = c.shape
@@ -152,15 +167,21 @@ def fast_interchange(c: FloatArray, w: FloatArray, sites: IntArray) -> IntArray:
         raise ValueError("the fast interchange needs an open site")
     is_open = np.zeros(n, dtype=bool)
     is_open[open_sites] = True
-    bounds = np.where(is_open, np.inf, -np.inf)  # of the gains, see best_swap
-    exact = np.zeros(n, dtype=bool)
     c1, c2, a1 = np.empty(m), np.empty(m), np.empty(m, dtype=np.int64)
     n1, n2, b1 = np.empty(m), np.empty(m), np.empty(m, dtype=np.int64)
     nearest_two(c, open_sites, c1, c2, a1)
+    bounds = np.full(n, np.inf)  # of the gains, see best_swap; the first pass needs them all
+    fill_gains(c, w, c1, np.flatnonzero(~is_open), bounds)
+    exact = ~is_open
+    ct = transposed
+    losses = np.empty((n, p))
+    kept = np.zeros(n, dtype=bool)
     current = math.fsum((w * c1).tolist())
     while True:
         limit = -SWAP_TOLERANCE * current
-        enter, leave, delta = best_swap(c, w, is_open, c1, c2, a1, p, bounds, exact, limit)
+        enter, leave, delta = best_swap(
+            c, w, is_open, c1, c2, a1, losses, kept, bounds, exact, limit
+        )
         if enter < 0 or not delta < limit:
             return open_sites
         candidate = open_sites.copy()
@@ -169,11 +190,14 @@ def fast_interchange(c: FloatArray, w: FloatArray, sites: IntArray) -> IntArray:
         value = math.fsum((w * n1).tolist())
         if not value < current:
             return open_sites
-        relax_bounds(c, w, bounds, exact, c1, n1)
+        if ct is None:
+            ct = np.ascontiguousarray(c.T)
+        relax_bounds(ct, w, bounds, exact, c1, n1)
         closing = open_sites[leave]
         is_open[closing], is_open[enter] = False, True
         bounds[closing], bounds[enter] = -np.inf, np.inf
-        exact[closing] = exact[enter] = False
+        exact[closing] = exact[enter] = kept[closing] = kept[enter] = False
+        swap_losses(ct, w, c1, c2, a1, n1, n2, b1, losses, kept)
         open_sites, current = candidate, value
         c1, c2, a1, n1, n2, b1 = n1, n2, b1, c1, c2, a1
 

@@ -26,16 +26,22 @@ Interchange pass (Whitaker 1983)
 With ``c1_j`` (at position ``a1_j`` of the open sites) and ``c2_j`` the
 cheapest and second cheapest open cost of atom ``j``, a pass prices the swaps
 (open the closed site ``i``, close the site at position ``r``) as
-``gain_i + loss_ir`` (see :mod:`routing_svc.sa.interchange`): ``gain_i`` in
-one loop over ``j``, the ``p`` losses of four sites in one loop over ``j``
-with a length-``p`` accumulator each. Every sum runs over ``j`` in ascending
-order, so every ``loss_ir`` is the sum scipy's sparse product formed.
+``gain_i + loss_ir`` (see :mod:`routing_svc.sa.interchange`): the gains and
+the ``p`` losses of four sites at a time in one loop over ``j``, with a
+length-``p`` accumulator each. Every sum runs over ``j`` in ascending order,
+so every ``loss_ir`` is the sum scipy's sparse product formed.
 
 Since ``loss_ir >= 0``, a site whose gain is above the best change found so
 far (or not below the acceptance limit) cannot win; a lower bound of every
 gain is carried from pass to pass (:func:`relax_bounds`), the sites are
 visited from the lowest bound up and the pass stops at the first bound that
 cannot win. The swap returned is the same as with every site priced.
+
+A site's losses, once summed, are kept from pass to pass: ``loss_ir`` sums
+over the atoms of position ``r`` only, so a swap changes the columns of the
+positions whose atoms' ``c1``, ``c2`` or ``a1`` changed, and only those are
+summed again (:func:`swap_losses`, over the transposed costs), with the same
+terms in the same order as a full sum.
 """
 
 from __future__ import annotations
@@ -47,7 +53,16 @@ from numba import njit
 
 from routing_svc.types import BoolArray, FloatArray, IntArray
 
-__all__ = ["best_swap", "gain_of", "lazy_greedy", "nearest_two", "relax_bounds"]
+__all__ = [
+    "best_swap",
+    "fill_gains",
+    "fill_losses",
+    "gain_of",
+    "lazy_greedy",
+    "nearest_two",
+    "relax_bounds",
+    "swap_losses",
+]
 
 
 @njit(cache=True, nogil=True)
@@ -159,7 +174,8 @@ def best_swap(
     c1: FloatArray,
     c2: FloatArray,
     a1: IntArray,
-    p: int,
+    losses: FloatArray,
+    kept: BoolArray,
     bounds: FloatArray,
     exact: BoolArray,
     limit: float,
@@ -168,17 +184,18 @@ def best_swap(
 
     Among equal changes the lowest closed site, then the lowest position wins (the first
     minimum of ``np.argmin`` over the row-major ``(n_sites, p)`` matrix of changes).
-    ``c1``, ``c2``, ``a1`` are those of the ``p`` open sites (:func:`nearest_two`).
+    ``c1``, ``c2``, ``a1`` are those of the ``p`` open sites (:func:`nearest_two`);
+    ``losses[i]`` holds ``loss_ir`` where ``kept[i]`` (kept up to date by
+    :func:`swap_losses`), and a row is summed (and kept) when first needed.
 
     ``bounds`` holds a lower bound of every closed site's gain (``-inf``: none; ``+inf``
     at open sites), the gain itself where ``exact``. As ``loss_ir >= 0``,
     ``gain_i <= gain_i + loss_ir``: sites are visited from the lowest bound up and
     the visit stops at a bound above the best change so far or at least ``limit``. A
-    visited site's gain is computed (and stored, exact) and its losses summed only if
-    its gain could still win. The result is the first minimum of the full matrix
-    whenever that minimum is below ``limit``; else possibly ``(-1, -1, inf)``.
+    visited site's gain is computed (and stored, exact) and its losses read only if its
+    gain could still win. The result is the first minimum of the full matrix whenever
+    that minimum is below ``limit``; else possibly ``(-1, -1, inf)``.
     """
-    losses = np.empty((4, p))
     rows = np.empty(4, dtype=np.int64)
     pending = 0
     enter, leave, best = -1, -1, np.inf
@@ -190,74 +207,143 @@ def best_swap(
             exact[i] = True
         if bounds[i] > best or bounds[i] >= limit:
             continue
+        if kept[i]:
+            enter, leave, best = _best_of(i, bounds[i], losses, enter, leave, best)
+            continue
         rows[pending] = i
         pending += 1
         if pending == 4:
-            _losses(c, w, c1, c2, a1, rows, pending, losses)
-            enter, leave, best = _best_of(rows, pending, bounds, losses, enter, leave, best)
+            fill_losses(c, w, c1, c2, a1, rows, losses)
+            for k in range(4):
+                kept[rows[k]] = True
+                enter, leave, best = _best_of(rows[k], bounds[rows[k]], losses, enter, leave, best)
             pending = 0
-    _losses(c, w, c1, c2, a1, rows, pending, losses)
-    return _best_of(rows, pending, bounds, losses, enter, leave, best)
+    fill_losses(c, w, c1, c2, a1, rows[:pending], losses)
+    for k in range(pending):
+        kept[rows[k]] = True
+        enter, leave, best = _best_of(rows[k], bounds[rows[k]], losses, enter, leave, best)
+    return enter, leave, best
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _best_of(
-    rows: IntArray,
-    count: int,
-    gains: FloatArray,
-    losses: FloatArray,
-    enter: int,
-    leave: int,
-    best: float,
+    i: int, gain: float, losses: FloatArray, enter: int, leave: int, best: float
 ) -> tuple[int, int, float]:
-    """The first least ``gain_i + loss_ir`` of the swaps so far and of the ``count`` rows."""
-    for k in range(count):
-        i = rows[k]
-        for r in range(losses.shape[1]):
-            delta = gains[i] + losses[k, r]
-            if delta < best or (delta == best and (i < enter or (i == enter and r < leave))):
-                enter, leave, best = i, r, delta
+    """The first least ``gain_i + loss_ir`` of the swaps so far and of site ``i``'s."""
+    for r in range(losses.shape[1]):
+        delta = gain + losses[i, r]
+        if delta < best or (delta == best and (i < enter or (i == enter and r < leave))):
+            enter, leave, best = i, r, delta
     return enter, leave, best
 
 
 @njit(cache=True, nogil=True)
-def _losses(
+def fill_losses(
     c: FloatArray,
     w: FloatArray,
     c1: FloatArray,
     c2: FloatArray,
     a1: IntArray,
     rows: IntArray,
-    count: int,
     losses: FloatArray,
 ) -> None:
-    """``losses[k, r] = loss_ir`` of ``i = rows[k]``, each summed over ``j`` in ascending
-    order; four rows in one loop over ``j`` (four independent sums)."""
-    losses[:count] = 0.0
+    """``losses[i, r] = loss_ir`` of the sites ``rows``, each summed over ``j`` in
+    ascending order; four sites in one loop over ``j`` (four independent sums). A term
+    that is not positive adds ``+0.0``, which leaves every sum as it was."""
     m = c.shape[1]
-    if count == 4:
-        i0, i1, i2, i3 = rows[0], rows[1], rows[2], rows[3]
+    for i in rows:
+        losses[i] = 0.0
+    full = rows.size - rows.size % 4
+    for k in range(0, full, 4):
+        i0, i1, i2, i3 = rows[k], rows[k + 1], rows[k + 2], rows[k + 3]
         for j in range(m):
             nearest, second, owner, weight = c1[j], c2[j], a1[j], w[j]
             f0 = min(c[i0, j], second) - nearest
             f1 = min(c[i1, j], second) - nearest
             f2 = min(c[i2, j], second) - nearest
             f3 = min(c[i3, j], second) - nearest
-            if f0 > 0.0:
-                losses[0, owner] += weight * f0
-            if f1 > 0.0:
-                losses[1, owner] += weight * f1
-            if f2 > 0.0:
-                losses[2, owner] += weight * f2
-            if f3 > 0.0:
-                losses[3, owner] += weight * f3
-        return
-    for k in range(count):
+            losses[i0, owner] += weight * f0 if f0 > 0.0 else 0.0
+            losses[i1, owner] += weight * f1 if f1 > 0.0 else 0.0
+            losses[i2, owner] += weight * f2 if f2 > 0.0 else 0.0
+            losses[i3, owner] += weight * f3 if f3 > 0.0 else 0.0
+    for k in range(full, rows.size):
         i = rows[k]
         for j in range(m):
             fallback = min(c[i, j], c2[j]) - c1[j]
+            losses[i, a1[j]] += w[j] * fallback if fallback > 0.0 else 0.0
+
+
+@njit(cache=True, nogil=True)
+def swap_losses(
+    ct: FloatArray,
+    w: FloatArray,
+    c1: FloatArray,
+    c2: FloatArray,
+    a1: IntArray,
+    n1: FloatArray,
+    n2: FloatArray,
+    b1: IntArray,
+    losses: FloatArray,
+    kept: BoolArray,
+) -> None:
+    """Bring the rows ``kept`` of ``losses`` from the open sites of ``c1, c2, a1`` to those
+    of ``n1, n2, b1``; ``ct`` is the cost matrix transposed (C-contiguous). The sites of
+    the swap must be out of ``kept`` (an open site has no row; a closing one is summed
+    anew when needed).
+
+    ``loss_ir`` sums over the atoms of position ``r`` alone, so it changes only at the
+    positions ``R`` that an atom whose cheapest or second cheapest cost or cheapest
+    position changed had, before or after. Those columns are summed again over the atoms
+    now at ``R`` in ascending order (the terms of a full sum, in its order); every other
+    entry stays as it was.
+    """
+    m = ct.shape[0]
+    moved = np.zeros(losses.shape[1], dtype=np.bool_)
+    for j in range(m):
+        if n1[j] != c1[j] or n2[j] != c2[j] or b1[j] != a1[j]:
+            moved[a1[j]] = True
+            moved[b1[j]] = True
+    rows = np.flatnonzero(kept)
+    columns = np.flatnonzero(moved)
+    for i in rows:
+        for r in columns:
+            losses[i, r] = 0.0
+    for j in range(m):
+        owner = b1[j]
+        if not moved[owner]:
+            continue
+        nearest, second, weight, costs = n1[j], n2[j], w[j], ct[j]
+        for i in rows:
+            fallback = min(costs[i], second) - nearest
             if fallback > 0.0:
-                losses[k, a1[j]] += w[j] * fallback
+                losses[i, owner] += weight * fallback
+
+
+@njit(cache=True, nogil=True)
+def fill_gains(
+    c: FloatArray, w: FloatArray, c1: FloatArray, rows: IntArray, gains: FloatArray
+) -> None:
+    """``gains[i] = gain_i`` of the sites ``rows``, each summed as :func:`gain_of` sums it;
+    four sites in one loop over ``j``. A term that is not negative adds ``+0.0``, which
+    leaves every sum as it was."""
+    m = c.shape[1]
+    full = rows.size - rows.size % 4
+    for k in range(0, full, 4):
+        i0, i1, i2, i3 = rows[k], rows[k + 1], rows[k + 2], rows[k + 3]
+        g0 = g1 = g2 = g3 = 0.0
+        for j in range(m):
+            nearest, weight = c1[j], w[j]
+            d0 = c[i0, j] - nearest
+            d1 = c[i1, j] - nearest
+            d2 = c[i2, j] - nearest
+            d3 = c[i3, j] - nearest
+            g0 += weight * d0 if d0 < 0.0 else 0.0
+            g1 += weight * d1 if d1 < 0.0 else 0.0
+            g2 += weight * d2 if d2 < 0.0 else 0.0
+            g3 += weight * d3 if d3 < 0.0 else 0.0
+        gains[i0], gains[i1], gains[i2], gains[i3] = g0, g1, g2, g3
+    for k in range(full, rows.size):
+        gains[rows[k]] = gain_of(c, w, c1, rows[k])
 
 
 @njit(cache=True, nogil=True)
@@ -273,7 +359,7 @@ def gain_of(c: FloatArray, w: FloatArray, c1: FloatArray, i: int) -> float:
 
 @njit(cache=True, nogil=True)
 def relax_bounds(
-    c: FloatArray,
+    ct: FloatArray,
     w: FloatArray,
     bounds: FloatArray,
     exact: BoolArray,
@@ -289,9 +375,9 @@ def relax_bounds(
     order) and its bound. Elsewhere a term grows where ``c1_j`` falls and falls by at
     most ``w_j (after_j - before_j)`` where it rises, so the gain falls by at most
     ``rise = sum_j w_j max(after_j - before_j, 0)``; a relative ``1e-9`` more covers
-    the rounding of the sums.
+    the rounding of the sums. ``ct`` is the cost matrix transposed (C-contiguous).
     """
-    n, m = c.shape
+    m, n = ct.shape
     rise = 0.0
     touched = np.zeros(n, dtype=np.bool_)
     for j in range(m):
@@ -300,8 +386,9 @@ def relax_bounds(
         if after[j] > before[j]:
             rise += w[j] * (after[j] - before[j])
         top = max(after[j], before[j])
+        costs = ct[j]
         for i in range(n):
-            if c[i, j] < top:
+            if costs[i] < top:
                 touched[i] = True
     for i in range(n):
         if touched[i]:

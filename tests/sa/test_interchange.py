@@ -15,7 +15,14 @@ import pytest
 import scipy.sparse as sp
 
 from routing_svc.sa.interchange import SWAP_TOLERANCE, fast_interchange, greedy
-from routing_svc.types import FloatArray, IntArray
+from routing_svc.sa.interchange_kernels import (
+    fill_gains,
+    fill_losses,
+    gain_of,
+    nearest_two,
+    swap_losses,
+)
+from routing_svc.types import BoolArray, FloatArray, IntArray
 
 BLOCK_ROWS = 256
 
@@ -184,3 +191,64 @@ def test_impossible_site_counts_are_refused() -> None:
     with pytest.raises(ValueError, match="open site"):
         fast_interchange(c, w, np.array([], dtype=np.int64))
     assert greedy(c, w, 0).tolist() == []
+
+
+def reference_losses(c: FloatArray, w: FloatArray, sites: IntArray) -> FloatArray:
+    """``loss_ir`` of every site by scipy's sparse product, as the reference pass forms it."""
+    m = c.shape[1]
+    sub = c[sites]
+    order = np.argsort(sub, axis=0, kind="stable")
+    atoms = np.arange(m)
+    c1 = sub[order[0], atoms]
+    c2 = sub[order[1], atoms] if sites.size > 1 else np.full(m, np.inf)
+    owner = sp.csr_array((w, (order[0], atoms)), shape=(sites.size, m))
+    fallback = np.maximum(np.minimum(c, c2) - c1, 0.0)
+    return np.asarray((owner @ fallback.T).T)
+
+
+@pytest.mark.parametrize(("integer", "zero_weights"), KINDS)
+def test_kept_losses_equal_a_full_sum_after_every_swap(integer: bool, zero_weights: bool) -> None:
+    """The losses kept across swaps are those a full pass sums, bit for bit, and the
+    gains summed four sites at a time are those summed one at a time."""
+    for seed in range(80):
+        c, w, p = instance(seed, integer=integer, zero_weights=zero_weights)
+        n, m = c.shape
+        if p == n:
+            continue
+        rng = np.random.default_rng([seed, 3])
+        sites = rng.choice(n, size=p, replace=False)
+        is_open = np.zeros(n, dtype=bool)
+        is_open[sites] = True
+        c1, c2, a1 = np.empty(m), np.empty(m), np.empty(m, dtype=np.int64)
+        nearest_two(c, sites, c1, c2, a1)
+        gains = np.full(n, np.nan)
+        fill_gains(c, w, c1, np.flatnonzero(~is_open), gains)
+        for i in np.flatnonzero(~is_open):
+            assert gains[i] == gain_of(c, w, c1, int(i)), seed
+        losses = np.full((n, p), np.nan)
+        kept: BoolArray = np.asarray(rng.random(n) < 0.7)
+        kept[sites] = False
+        fill_losses(c, w, c1, c2, a1, np.flatnonzero(kept), losses)
+        ct = np.ascontiguousarray(c.T)
+        for _ in range(4):
+            leave = int(rng.integers(p))
+            enter = int(rng.choice(np.flatnonzero(~is_open)))
+            closing = int(sites[leave])
+            sites = sites.copy()
+            sites[leave] = enter
+            is_open[closing], is_open[enter] = False, True
+            kept[closing] = kept[enter] = False
+            n1, n2, b1 = np.empty(m), np.empty(m), np.empty(m, dtype=np.int64)
+            nearest_two(c, sites, n1, n2, b1)
+            swap_losses(ct, w, c1, c2, a1, n1, n2, b1, losses, kept)
+            expected = reference_losses(c, w, sites)
+            assert np.array_equal(losses[kept], expected[kept]), seed
+            c1, c2, a1 = n1, n2, b1
+
+
+def test_a_shared_transposed_matrix_gives_the_same_swaps() -> None:
+    for seed in range(30):
+        c, w, p = instance(seed, integer=False, zero_weights=False)
+        start = np.random.default_rng([seed, 4]).choice(c.shape[0], size=p, replace=False)
+        shared = fast_interchange(c, w, start, transposed=np.ascontiguousarray(c.T))
+        assert shared.tolist() == fast_interchange(c, w, start).tolist(), seed
