@@ -27,13 +27,19 @@ import os
 import signal
 import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
-from typing import Generic
+from typing import Generic, TypeVar
+
+import numpy as np
 
 from routing_svc.sa.consolidation import Consolidation, ConsolidationJob, ConsolidationKey
+from routing_svc.sa.interchange import fast_interchange, greedy, neighbourhood_search
 from routing_svc.sa.space import P
+
+T = TypeVar("T")
 
 logger = logging.getLogger(__name__)
 
@@ -46,6 +52,17 @@ LONGEST_WAIT_S = 120.0
 
 def _solve(job: ConsolidationJob[P]) -> Consolidation[P]:
     return job.solve()
+
+
+def _ready() -> bool:
+    """Load what a solve runs (the package, the compiled kernels from their cache) in a
+    worker that has just started."""
+    costs = np.array([[0.0, 2.0, 1.0], [2.0, 0.0, 1.0], [1.0, 1.0, 0.0]])
+    weights = np.ones(3)
+    sites = neighbourhood_search(
+        costs, weights, fast_interchange(costs, weights, greedy(costs, weights, 2))
+    )
+    return bool(sites.size == 2)
 
 
 def _exit_with(parent: int) -> None:
@@ -65,7 +82,8 @@ def _exit_with(parent: int) -> None:
 
 
 class ConsolidationSolver:
-    """Worker processes that solve consolidation jobs, started on the first job.
+    """Worker processes that solve consolidation jobs, started by :meth:`start` or on
+    the first job.
 
     Parameters
     ----------
@@ -80,8 +98,17 @@ class ConsolidationSolver:
         self._pool: ProcessPoolExecutor | None = None
         self._guard = threading.Lock()
 
+    def start(self) -> list[Future[bool]]:
+        """Start the workers now, each loading what a solve runs, so that the first
+        consolidation after the service starts does not wait for a process to start and
+        import the package (the service calls this at start-up)."""
+        return [self._submitted(_ready) for _ in range(self.workers)]
+
     def submit(self, job: ConsolidationJob[P]) -> Future[Consolidation[P]]:
         """Solve ``job`` in a worker; a pool whose worker died is started again."""
+        return self._submitted(_solve, job)
+
+    def _submitted(self, work: Callable[..., T], *args: object) -> Future[T]:
         with self._guard:
             for _ in range(2):
                 if self._pool is None:
@@ -92,7 +119,7 @@ class ConsolidationSolver:
                         initargs=(os.getpid(),),
                     )
                 try:
-                    return self._pool.submit(_solve, job)
+                    return self._pool.submit(work, *args)
                 except BrokenProcessPool:
                     self._pool.shutdown(wait=False, cancel_futures=True)
                     self._pool = None

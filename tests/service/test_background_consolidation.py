@@ -26,7 +26,7 @@ from routing_svc.network import RoadSpace
 from routing_svc.sa import Fleet, Objective, Vehicle, learning_config
 from routing_svc.sa.consolidation import ConsolidationPolicy
 from routing_svc.service.app import create_app
-from routing_svc.service.background_solver import PendingConsolidation
+from routing_svc.service.background_solver import ConsolidationSolver, PendingConsolidation
 from tests.helpers import (
     NET,
     LiveServer,
@@ -236,3 +236,26 @@ def gone(pids: list[int], *, within_s: float) -> bool:
             return False
         time.sleep(0.05)
     return True
+
+
+def test_started_workers_have_loaded_the_solver() -> None:
+    solver = ConsolidationSolver(2)
+    try:
+        ready = solver.start()
+        assert [f.result(timeout=PATIENCE_S) for f in ready] == [True, True]
+    finally:
+        solver.close()
+
+
+def test_the_workers_start_with_the_service(tmp_path: Path) -> None:
+    """Before any fleet has a consolidation due, the service's worker is running, so that
+    the first solve does not wait for a process to start."""
+    server = LiveServer(f"sqlite:///{tmp_path / 'events.db'}", tmp_path).start()
+    assert server.process is not None
+    try:
+        deadline = time.monotonic() + PATIENCE_S
+        while not children(server.process.pid):
+            assert time.monotonic() < deadline, "no worker process started with the service"
+            time.sleep(0.1)
+    finally:
+        server.stop()
