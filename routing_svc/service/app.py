@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -125,11 +124,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 recent_window=settings.recent_window,
                 consolidation_workers=settings.consolidation_workers,
             )
-            if service.solver is not None:
-                try:  # in the background: serving starts meanwhile
-                    service.solver.start()
-                except (RuntimeError, OSError):  # the first consolidation tries again
-                    logging.getLogger(__name__).exception("consolidation workers not started")
             fleet_gauges.COLLECTOR.track(service)
             app.state.settings = settings
             app.state.networks = registry

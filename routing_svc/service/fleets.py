@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import hashlib
 import json
+import logging
 import threading
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Future
@@ -31,6 +32,8 @@ from routing_svc.service.vehicle_states import resolve_changes
 from routing_svc.service.write_path import Answer, GroupCommit, PendingAnswer
 from routing_svc.store import EventLog, EventRecord, NewEvent
 from routing_svc.types import NetPosition
+
+logger = logging.getLogger(__name__)
 
 
 def request_hash(body: Any) -> str:
@@ -56,6 +59,11 @@ class FleetService:
             ConsolidationSolver(consolidation_workers) if consolidation_workers > 0 else None
         )
         """Where due consolidations are solved (``None``: on the write path)."""
+        if self.solver is not None:
+            try:  # in the background: the service serves meanwhile
+                self.solver.start()
+            except (RuntimeError, OSError):  # the first consolidation tries again
+                logger.exception("the consolidation workers did not start")
         self._cache: dict[str, FleetRuntime] = {}
         self._locks: dict[str, threading.Lock] = {}
         self._locks_guard = threading.Lock()
