@@ -97,6 +97,8 @@ class ConsolidationSolver:
         self.workers = workers
         self._pool: ProcessPoolExecutor | None = None
         self._guard = threading.Lock()
+        self._solving = False
+        """Whether a job was submitted since the pool started (:meth:`close` waits)."""
 
     def start(self) -> list[Future[bool]]:
         """Start the workers now, each loading what a solve runs, so that the first
@@ -106,7 +108,9 @@ class ConsolidationSolver:
 
     def submit(self, job: ConsolidationJob[P]) -> Future[Consolidation[P]]:
         """Solve ``job`` in a worker; a pool whose worker died is started again."""
-        return self._submitted(_solve, job)
+        future = self._submitted(_solve, job)
+        self._solving = True
+        return future
 
     def _submitted(self, work: Callable[..., T], *args: object) -> Future[T]:
         with self._guard:
@@ -127,11 +131,13 @@ class ConsolidationSolver:
 
     def close(self) -> None:
         """Stop the workers; jobs not finished are dropped (their fleets are still due,
-        and solve again when the service comes back)."""
+        and solve again when the service comes back). Workers that only started
+        (:meth:`start`) are not waited for: they leave once loaded."""
         with self._guard:
             if self._pool is not None:
-                self._pool.shutdown(wait=True, cancel_futures=True)
+                self._pool.shutdown(wait=self._solving, cancel_futures=True)
                 self._pool = None
+                self._solving = False
 
 
 @dataclass(frozen=True, slots=True)
