@@ -104,16 +104,15 @@ class ConsolidationSolver:
         """Start the workers now, each loading what a solve runs, so that the first
         consolidation after the service starts does not wait for a process to start and
         import the package (the service calls this at start-up)."""
-        return [self._submitted(_ready) for _ in range(self.workers)]
+        return [self._submitted(_ready, solving=False) for _ in range(self.workers)]
 
     def submit(self, job: ConsolidationJob[P]) -> Future[Consolidation[P]]:
         """Solve ``job`` in a worker; a pool whose worker died is started again."""
-        future = self._submitted(_solve, job)
-        self._solving = True
-        return future
+        return self._submitted(_solve, job, solving=True)
 
-    def _submitted(self, work: Callable[..., T], *args: object) -> Future[T]:
+    def _submitted(self, work: Callable[..., T], *args: object, solving: bool) -> Future[T]:
         with self._guard:
+            self._solving = self._solving or solving
             for _ in range(2):
                 if self._pool is None:
                     self._pool = ProcessPoolExecutor(
