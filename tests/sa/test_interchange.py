@@ -45,18 +45,12 @@ def reference_greedy(c: FloatArray, w: FloatArray, p: int) -> IntArray:
 
 def reference_fast_interchange(c: FloatArray, w: FloatArray, sites: IntArray) -> IntArray:
     """Whitaker's fast interchange with the ``(n, p)`` matrix of swap changes."""
-    n, m = c.shape
+    n = c.shape[0]
     open_sites = np.array(sites, dtype=np.int64)
     p = open_sites.size
-    atoms = np.arange(m)
     current = _value(c, w, open_sites)
     while True:
-        sub = c[open_sites]
-        order = np.argsort(sub, axis=0, kind="stable")
-        a1 = order[0]
-        c1 = sub[a1, atoms]
-        c2 = sub[order[1], atoms] if p > 1 else np.full(m, np.inf)
-        owner = sp.csr_array((w, (a1, atoms)), shape=(p, m))
+        c1, c2, owner = reference_nearest(c, w, open_sites)
         delta = np.empty((n, p))
         for lo in range(0, n, BLOCK_ROWS):
             block = c[lo : lo + BLOCK_ROWS]
@@ -193,15 +187,23 @@ def test_impossible_site_counts_are_refused() -> None:
     assert greedy(c, w, 0).tolist() == []
 
 
-def reference_losses(c: FloatArray, w: FloatArray, sites: IntArray) -> FloatArray:
-    """``loss_ir`` of every site by scipy's sparse product, as the reference pass forms it."""
+def reference_nearest(
+    c: FloatArray, w: FloatArray, sites: IntArray
+) -> tuple[FloatArray, FloatArray, sp.csr_array]:
+    """Every atom's cheapest and second cheapest open cost, and the sparse ``(p, m)``
+    matrix of the weights by the position of the cheapest (a stable sort's first)."""
     m = c.shape[1]
     sub = c[sites]
     order = np.argsort(sub, axis=0, kind="stable")
     atoms = np.arange(m)
     c1 = sub[order[0], atoms]
     c2 = sub[order[1], atoms] if sites.size > 1 else np.full(m, np.inf)
-    owner = sp.csr_array((w, (order[0], atoms)), shape=(sites.size, m))
+    return c1, c2, sp.csr_array((w, (order[0], atoms)), shape=(sites.size, m))
+
+
+def reference_losses(c: FloatArray, w: FloatArray, sites: IntArray) -> FloatArray:
+    """``loss_ir`` of every site by scipy's sparse product, as the reference pass forms it."""
+    c1, c2, owner = reference_nearest(c, w, sites)
     fallback = np.maximum(np.minimum(c, c2) - c1, 0.0)
     return np.asarray((owner @ fallback.T).T)
 
