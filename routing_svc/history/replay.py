@@ -9,8 +9,8 @@ same command sends the same chunks with the same keys, and the service answers
 the chunks it already applied from its log, applying nothing twice.
 
 Two clients speak the route: :class:`InProcessHistoryClient` calls the
-service's domain code on a database directly (the route's body model, the same
-request digest), :class:`HttpHistoryClient` a running server.
+service's domain code on a database directly (positions resolved as the route
+resolves them, the same request digest), :class:`HttpHistoryClient` a running server.
 """
 
 from __future__ import annotations
@@ -31,14 +31,41 @@ from routing_svc.errors import InvalidInput
 from routing_svc.history.calls import BadRow, CallTable
 from routing_svc.history.places import PlacedCalls
 from routing_svc.long_lived import frozen_heap
+from routing_svc.service.canonical import result_cost
 from routing_svc.service.inprocess import InProcessFleetClient
-from routing_svc.service.schemas import TargetBatch
+from routing_svc.service.schemas import TargetBatch, edge_target
 
 MAX_CHUNK: int = next(
     m.max_length for m in TargetBatch.model_fields["targets"].metadata if hasattr(m, "max_length")
 )
 """The batch route's limit on targets per request."""
 DEFAULT_CHUNK = 2_000
+
+
+@dataclass
+class CallChunk:
+    """Calls sent in one request: edge, offset and required types (or ``None``) each."""
+
+    edges: list[str]
+    offsets: list[float]
+    requires: list[tuple[str, ...] | None]
+
+    def targets(self) -> list[dict[str, Any]]:
+        """The batch route's ``targets``, as validated."""
+        return [
+            edge_target(e, o, r)
+            for e, o, r in zip(self.edges, self.offsets, self.requires, strict=True)
+        ]
+
+
+@dataclass
+class ChunkAnswer:
+    """What a replay keeps of a chunk's answer: each call's cost, the first call's
+    event number, and the fleet's version after the chunk."""
+
+    costs: list[float]
+    first_seq: int
+    version: int
 
 
 class HistoryClient(FleetClient, Protocol):
@@ -52,12 +79,36 @@ class HistoryClient(FleetClient, Protocol):
         """Each target's result and the version after the batch."""
         ...
 
+    def post_chunk(self, fleet_id: str, chunk: CallChunk, *, idempotency_key: str) -> ChunkAnswer:
+        """``post_batch`` of the chunk's calls, answered with what a replay keeps."""
+        ...
+
 
 class InProcessHistoryClient(InProcessFleetClient):
     """The in-process client with the batch route's domain call."""
 
     def __enter__(self) -> InProcessHistoryClient:
         return self
+
+    def post_chunk(self, fleet_id: str, chunk: CallChunk, *, idempotency_key: str) -> ChunkAnswer:
+        """The batch route's domain call on calls placed on the fleet's network already
+        (:func:`~routing_svc.history.places.place_locally`): positions resolved as the
+        route resolves them, the same request digest, and only the costs read back."""
+        entry = self.service.network_of(fleet_id)
+        resolved = [
+            (entry.resolve_edge(e, o), list(r) if r is not None else None)
+            for e, o, r in zip(chunk.edges, chunk.offsets, chunk.requires, strict=True)
+        ]
+        if not 1 <= len(resolved) <= MAX_CHUNK:
+            raise InvalidInput(f"a chunk holds 1 to {MAX_CHUNK} calls, got {len(resolved)}")
+        results, version = self.service.submit_resolved(
+            fleet_id,
+            resolved,
+            idempotency_key=idempotency_key,
+            body={"targets": chunk.targets()},
+        ).result()
+        first_seq = int(orjson.loads(results[0])["seq"])
+        return ChunkAnswer([result_cost(r) for r in results], first_seq, version)
 
     def post_batch(
         self, fleet_id: str, targets: list[dict[str, Any]], *, idempotency_key: str
@@ -86,6 +137,12 @@ class HttpHistoryClient(HttpFleetClient):
             )
         )
         return list(answer["results"]), int(answer["version"])
+
+    def post_chunk(self, fleet_id: str, chunk: CallChunk, *, idempotency_key: str) -> ChunkAnswer:
+        results, version = self.post_batch(
+            fleet_id, chunk.targets(), idempotency_key=idempotency_key
+        )
+        return ChunkAnswer([float(r["cost"]) for r in results], int(results[0]["seq"]), version)
 
     def resolve_positions(self, network_id: str, positions: list[dict[str, Any]]) -> dict[str, Any]:
         """``POST /v1/networks/{id}/positions:resolve``: each position on the network, or
@@ -218,19 +275,18 @@ def replay_history(
     started = time.perf_counter()
     with frozen_heap(), tqdm(total=n, disable=not progress, file=sys.stderr, unit="call") as bar:
         for index in range(chunks):
-            part = order[index * chunk_size : (index + 1) * chunk_size]
-            body = [
-                {"position": {"edge": placed.edges[i], "offset": placed.offsets[i]}}
-                | ({"requires": list(r)} if (r := table.requires[placed.rows[i]]) else {})
-                for i in part.tolist()
-            ]
+            part = order[index * chunk_size : (index + 1) * chunk_size].tolist()
+            chunk = CallChunk(
+                [placed.edges[i] for i in part],
+                [placed.offsets[i] for i in part],
+                [table.requires[r] for r in placed.rows[part].tolist()],
+            )
             key = chunk_key(table.sha256, chunk_size, index)
-            results, version = client.post_batch(fleet_id, body, idempotency_key=key)
-            costs[index * chunk_size : index * chunk_size + len(results)] = [
-                r["cost"] for r in results
-            ]
-            if results and int(results[0]["seq"]) > int(before["version"]):
-                applied += len(results)
+            answer = client.post_chunk(fleet_id, chunk, idempotency_key=key)
+            version = answer.version
+            costs[index * chunk_size : index * chunk_size + len(answer.costs)] = answer.costs
+            if answer.first_seq > int(before["version"]):
+                applied += len(answer.costs)
                 applied_chunks += 1
             bar.update(len(part))
             if (index + 1) % every == 0 and index + 1 < chunks:

@@ -23,7 +23,7 @@ from collections.abc import Sequence
 from json.encoder import encode_basestring_ascii
 from typing import Any, NamedTuple
 
-__all__ = ["TargetResult", "dumps", "target_payload"]
+__all__ = ["TargetResult", "dumps", "result_cost", "target_payload"]
 
 _CANONICAL = json.JSONEncoder(separators=(",", ":"), sort_keys=True, allow_nan=False)
 
@@ -245,3 +245,22 @@ class TargetResult(NamedTuple):
                 "}",
             )
         )
+
+
+_COST_AFTER_BACKED_OFF = '],"cost":'
+
+
+def result_cost(text: str) -> float:
+    """The ``cost`` of a target result's JSON text (:meth:`TargetResult.to_json`).
+
+    Read where the template writes it, right after ``backed_off``: no value of a
+    described position is a list and strings are escaped, so the first ``],"`` closes
+    ``backed_off``. A result laid out otherwise (one that holds a consolidation) is
+    parsed whole.
+    """
+    if text.startswith('{"backed_off":['):
+        end = text.find('],"', 15)
+        if text.startswith(_COST_AFTER_BACKED_OFF, end):
+            start = end + len(_COST_AFTER_BACKED_OFF)
+            return float(text[start : text.index(",", start)])
+    return float(json.loads(text)["cost"])

@@ -256,15 +256,18 @@ class FleetService:
 
     # -- targets ----------------------------------------------------------------
 
+    def network_of(self, fleet_id: str) -> NetworkEntry:
+        """The network a fleet lives on."""
+        cached = self._cache.get(fleet_id)  # a fleet's network never changes: no lock
+        if cached is not None and not cached.deleted:
+            return cached.entry
+        with self._locked(fleet_id):
+            return self._runtime(fleet_id, fresh=False).entry
+
     def _resolve_targets(
         self, fleet_id: str, targets: Sequence[TargetSpec]
     ) -> list[tuple[NetPosition, list[str] | None]]:
-        cached = self._cache.get(fleet_id)  # a fleet's network never changes: no lock
-        if cached is not None and not cached.deleted:
-            entry = cached.entry
-        else:
-            with self._locked(fleet_id):
-                entry = self._runtime(fleet_id, fresh=False).entry
+        entry = self.network_of(fleet_id)
         return [
             (entry.resolve(t.position), list(t.requires) if t.requires else None) for t in targets
         ]
@@ -283,7 +286,25 @@ class FleetService:
 
         Positions are resolved first, so a bad position fails here and queues nothing.
         """
-        resolved = self._resolve_targets(fleet_id, targets)
+        return self.submit_resolved(
+            fleet_id,
+            self._resolve_targets(fleet_id, targets),
+            idempotency_key=idempotency_key,
+            body=body,
+            loop=loop,
+        )
+
+    def submit_resolved(
+        self,
+        fleet_id: str,
+        resolved: Sequence[tuple[NetPosition, list[str] | None]],
+        *,
+        idempotency_key: str | None = None,
+        body: Any = None,
+        loop: asyncio.AbstractEventLoop | None = None,
+    ) -> PendingAnswer:
+        """:meth:`submit_targets` for targets already resolved on the fleet's network
+        (``body``, the request the key's digest is taken over, as the route has it)."""
 
         def compute(runtime: FleetRuntime) -> list[NewEvent]:
             out = []

@@ -61,18 +61,7 @@ class NetworkEntry:
     def resolve(self, position: Position) -> NetPosition:
         """A position from the API (edge/offset, x/y or lon/lat) on this network."""
         if isinstance(position, EdgePosition):
-            index = self.network.edge_index.get(position.edge)
-            if index is None:
-                raise UnknownEdge(
-                    f"edge {position.edge!r} is not a usable edge of network {self.id!r}"
-                )
-            length = float(self.network.length[index])
-            if position.offset > length:
-                raise InvalidInput(
-                    f"offset {position.offset} is beyond the end of edge {position.edge!r} "
-                    f"(length {length})"
-                )
-            return NetPosition(index, float(position.offset))
+            return self.resolve_edge(position.edge, position.offset)
         if isinstance(position, XYPosition):
             return self.snapper.snap_xy([position.x], [position.y], max_distance=SNAP_DISTANCE_M)[0]
         if isinstance(position, LonLatPosition):
@@ -80,6 +69,28 @@ class NetworkEntry:
                 [position.lon], [position.lat], max_distance=SNAP_DISTANCE_M
             )[0]
         raise InvalidInput("unknown position form")
+
+    def resolve_edge(self, edge: str, offset: float) -> NetPosition:
+        """The place ``offset`` metres along the edge with SUMO id ``edge``.
+
+        Raises
+        ------
+        UnknownEdge
+            If the edge is not a usable edge of this network.
+        InvalidInput
+            If the offset is not a number from 0 to the edge's length.
+        """
+        index = self.network.edge_index.get(edge)
+        if index is None:
+            raise UnknownEdge(f"edge {edge!r} is not a usable edge of network {self.id!r}")
+        length = float(self.network.length[index])
+        if offset > length:
+            raise InvalidInput(
+                f"offset {offset} is beyond the end of edge {edge!r} (length {length})"
+            )
+        if not offset >= 0.0:  # also NaN
+            raise InvalidInput(f"offset {offset} on edge {edge!r} is not a number from 0 up")
+        return NetPosition(index, float(offset))
 
     def describe(self, position: NetPosition) -> dict[str, Any]:
         """``edge, offset, x, y`` (and ``lon, lat`` where the network has a projection).

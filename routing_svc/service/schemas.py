@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from itertools import pairwise
 from typing import Annotated, Any, Literal
 
@@ -260,6 +261,15 @@ class TargetSpec(Strict):
 
 class TargetBatch(Strict):
     targets: Annotated[list[TargetSpec], Field(min_length=1, max_length=10_000)]
+
+
+def edge_target(edge: str, offset: float, requires: Sequence[str] | None) -> dict[str, Any]:
+    """A target ``offset`` metres along ``edge`` as a validated body holds it
+    (``TargetSpec.model_dump(mode="json")``, which a request's digest is taken over)."""
+    return {
+        "position": {"edge": edge, "offset": float(offset)},
+        "requires": list(requires) if requires is not None else None,
+    }
 
 
 class TravelTimes(Strict):

@@ -11,6 +11,7 @@ from pathlib import Path
 import httpx
 import pytest
 
+from routing_svc.errors import InvalidInput, UnknownEdge
 from routing_svc.history import (
     HistoryRefused,
     InProcessHistoryClient,
@@ -18,9 +19,10 @@ from routing_svc.history import (
     read_calls,
     replay_history,
 )
-from routing_svc.history.replay import chunk_key
+from routing_svc.history.replay import CallChunk, chunk_key
 from routing_svc.network import CompiledNetwork
 from routing_svc.network.snapping import point_on_edge
+from routing_svc.service.schemas import TargetSpec
 from tests.history.conftest import DRT, cli, fleet_at, random_calls, write_csv
 
 
@@ -236,3 +238,40 @@ def test_an_import_whose_consolidations_a_worker_solves_applies_each_call_once_a
         again = _import(client, path, "f", chunk_size=100)
         assert (again.applied, again.version_after) == (0, 1_201)
         assert client.get_fleet("f") == state
+
+
+@pytest.mark.parametrize(
+    ("offset", "requires"), [(12.5, None), (0, None), (3.0, ("a", "b")), (7.25, ("a",))]
+)
+def test_a_chunk_target_is_the_body_the_route_validates(
+    offset: float, requires: tuple[str, ...] | None
+) -> None:
+    chunk = CallChunk(["e1"], [offset], [requires])
+    sent = {"position": {"edge": "e1", "offset": offset}, "requires": requires}
+    validated = TargetSpec.model_validate(sent).model_dump(mode="json")
+    assert chunk.targets() == [validated]
+    assert json.dumps(chunk.targets()) == json.dumps([validated])  # 0 is written 0.0 by both
+
+
+def test_a_chunk_and_the_batch_route_share_keys_and_a_bad_chunk_applies_nothing(
+    client: InProcessHistoryClient, drt: CompiledNetwork
+) -> None:
+    calls = random_calls(drt, 30, seed=6)
+    client.create_fleet(fleet_at([(calls[0]["edge"], 0.0), (calls[1]["edge"], 0.0)]))
+    chunk = CallChunk([c["edge"] for c in calls], [c["offset"] for c in calls], [None] * 30)
+    answer = client.post_chunk("f", chunk, idempotency_key="k1")
+    assert (answer.first_seq, answer.version) == (2, 31)
+    state = client.get_fleet("f")
+    # the same calls through the route's body model: answered from the log
+    results, version = client.post_batch("f", chunk.targets(), idempotency_key="k1")
+    assert version == 31 and [r["cost"] for r in results] == answer.costs
+    assert [r["seq"] for r in results] == list(range(2, 32))
+    assert client.get_fleet("f") == state
+    for edges, offsets, refused in (
+        ([calls[0]["edge"], "no-such-edge"], [1.0, 1.0], UnknownEdge),
+        ([calls[0]["edge"], calls[1]["edge"]], [1.0, 1e9], InvalidInput),
+        ([calls[0]["edge"], calls[1]["edge"]], [1.0, math.nan], InvalidInput),
+    ):
+        with pytest.raises(refused):
+            client.post_chunk("f", CallChunk(edges, offsets, [None, None]), idempotency_key="k2")
+    assert client.get_fleet("f") == state

@@ -10,9 +10,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from routing_svc.service.canonical import TargetResult, dumps, target_payload
+from routing_svc.service.canonical import TargetResult, dumps, result_cost, target_payload
 
-_STRINGS = ["v01", "-157539101#0", 'quote"back\\slash', "Zürich/Straße", "tab\tnew\nline", "🚕"]
+_STRINGS = [
+    "v01", "-157539101#0", 'quote"back\\slash', "Zürich/Straße", "tab\tnew\nline", "🚕",
+    '],"cost":9,"x',
+]  # fmt: skip
 
 
 def _float(rng: np.random.Generator) -> float:
@@ -97,6 +100,19 @@ def test_template_writes_the_canonical_json() -> None:
         text = TargetResult(**arguments).to_json()
         assert text == dumps(TargetResult(**arguments).as_dict())
         assert json.loads(text)["cost"] == arguments["cost"]
+
+
+def test_the_cost_read_from_a_result_is_the_cost_it_holds() -> None:
+    rng = np.random.default_rng(17)
+    consolidated = {"accepted": True, "cost": 5.0, "positions": [], "sample": [1], "z": [2.5]}
+    for k in range(20_000):
+        arguments = _arguments(rng)
+        if k % 10 == 0:  # written by the encoder, "consolidated" before "cost"
+            arguments["consolidated"] = consolidated
+        text = TargetResult(**arguments).to_json()
+        cost = result_cost(text)
+        assert cost == json.loads(text)["cost"]
+        assert math.copysign(1.0, cost) == math.copysign(1.0, arguments["cost"])
 
 
 def test_the_dict_is_the_result_the_api_documents() -> None:
