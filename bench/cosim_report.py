@@ -464,31 +464,32 @@ The same defaults on three networks the report does not cover: Bologna
 OpenStreetMap extract (`routing-svc import-osm ../shared/nets/badhersfeld.osm.xml.gz -o
 bhosm.net.xml.gz`) and `bs3d` (the Braunschweig network of SUMO's game,
 `tools/game/bs3d`, `--net bs3d`), 3 seeds, 1 h of requests at 40/h, background 3
-vehicles/h/km, a history of 1,000, idle vehicles at the service's posts, the queue served
-oldest first (`--queue fifo`, the co-simulation's only order then; measured with their
-own commands, not this report's runs; 2026-12-01):
+vehicles/h/km, a history of 1,000, idle vehicles at the service's posts, measured with
+their own commands, not this report's runs. Bologna and the OSM import with 10 vehicles
+were measured on 2026-12-04 (`bb926d4`) with the co-simulation's defaults; the rows marked
+(†) on 2026-12-01 with the queue served oldest first (`--queue fifo` added to the command,
+the co-simulation's only order then), and not run again:
 
 ```
 routing-svc cosim --net NET --mode MODE --vehicles N --hours 1 --rate 40 --density 3 \\
-    --seeds 0,1,2 --history 1000 --policies sa,optimum,sumo-stop --workers 1 --no-plots \\
-    --queue fifo
+    --seeds 0,1,2 --history 1000 --policies sa,optimum,sumo-stop --workers 1 --no-plots
 ```
 
 | experiment | busy | `sa` mean / p90 (s) | `sumo-stop` | `optimum` | ratios |
 |---|---|---|---|---|---|
 | bologna persons 10 | 0.37 | 86 / 171 | 122 / 210 | 83 / 161 | 0.70, **0.82**, 1.04 |
 | bologna incidents 10 | 0.39 | 110 / 211 | 152 / 298 | 106 / 199 | 0.72, 0.71, 1.04 |
-| OSM persons 10 | 0.69 | 420 / 954 | 546 / 1,431 | 508 / 1,049 | 0.77, 0.67, 0.83 |
-| OSM incidents 10 | 0.69 | 453 / inf | 502 / inf | 409 / 980 | **0.90**, **inf**, **1.11** |
-| OSM incidents 20 (*) | 0.32 | 257 / inf | 333 / 1,675 | 269 / 937 | 0.77, **inf**, 0.95 |
-| bs3d rebuilt, persons 10 | 0.24 | 45 / 81 | 84 / 150 | 51 / 88 | 0.54, 0.54, 0.88 |
-| bs3d rebuilt, incidents 10 | 0.23 | 42 / 80 | 77 / 136 | 44 / 82 | 0.54, 0.59, 0.95 |
-| bs3d rebuilt, persons 20 | 0.11 | 30 / 55 | 53 / 105 | 36 / 69 | 0.57, 0.52, 0.85 |
-| bs3d rebuilt, incidents 20 | 0.11 | 33 / 63 | 48 / 78 | 29 / 53 | 0.68, **0.804**, **1.13** |
-| bs3d, persons 10 | 0.68 | 358 / 840 | 273 / 834 | 383 / 849 | **1.31**, **1.01**, 0.93 |
-| bs3d, incidents 10 | 0.79 | 827 / inf | 646 / inf | 881 / inf | **1.28**, **inf**, 0.94 |
-| bs3d, persons 20 | 0.27 | 107 / 377 | 135 / 455 | 132 / 423 | 0.79, **0.83**, 0.81 |
-| bs3d, incidents 20 | 0.40 | 428 / 1,134 | 463 / inf | 486 / 1,219 | **0.93**, 0, 0.88 |
+| OSM persons 10 | 0.69 | 418 / 919 | 546 / 1,431 | 456 / 925 | 0.77, 0.64, 0.92 |
+| OSM incidents 10 | 0.69 | 431 / 1,491 | 502 / inf | 400 / 956 | **0.86**, 0, **1.08** |
+| OSM incidents 20 (†, *) | 0.32 | 257 / inf | 333 / 1,675 | 269 / 937 | 0.77, **inf**, 0.95 |
+| bs3d rebuilt, persons 10 (†) | 0.24 | 45 / 81 | 84 / 150 | 51 / 88 | 0.54, 0.54, 0.88 |
+| bs3d rebuilt, incidents 10 (†) | 0.23 | 42 / 80 | 77 / 136 | 44 / 82 | 0.54, 0.59, 0.95 |
+| bs3d rebuilt, persons 20 (†) | 0.11 | 30 / 55 | 53 / 105 | 36 / 69 | 0.57, 0.52, 0.85 |
+| bs3d rebuilt, incidents 20 (†) | 0.11 | 33 / 63 | 48 / 78 | 29 / 53 | 0.68, **0.804**, **1.13** |
+| bs3d, persons 10 (†) | 0.68 | 358 / 840 | 273 / 834 | 383 / 849 | **1.31**, **1.01**, 0.93 |
+| bs3d, incidents 10 (†) | 0.79 | 827 / inf | 646 / inf | 881 / inf | **1.28**, **inf**, 0.94 |
+| bs3d, persons 20 (†) | 0.27 | 107 / 377 | 135 / 455 | 132 / 423 | 0.79, **0.83**, 0.81 |
+| bs3d, incidents 20 (†) | 0.40 | 428 / 1,134 | 463 / inf | 486 / 1,219 | **0.93**, 0, 0.88 |
 
 Ratios: mean / `sumo-stop` (goal 0.8), p90 / `sumo-stop` (0.8), mean / `optimum` (1.05);
 missed in bold; 0 where `sumo-stop`'s p90 is infinite. Means are over the served requests.
@@ -496,8 +497,11 @@ missed in bold; 0 where `sumo-stop`'s p90 is infinite. Means are over the served
 (*) Measured on `6fbbb96`, before the co-simulation fixes of `CHANGELOG.md`; not
 run again.
 
-- **Bologna and the OSM import.** `sa` meets 10 of the 15 checks. The other four gave the
-  same figures on `6fbbb96` to the second. A p90 is infinite when
+- **Bologna and the OSM import.** `sa` meets 11 of the 15 checks. Bologna, where no request
+  waited in the queue, gave the figures of the oldest-first queue to the second. On the
+  imported network the queue served soonest lowered `sa`'s p90 wait of incidents from
+  infinite to 1,491 s and its mean from 453 to 431 s; `sa` still waits 1.08 times as long
+  as `optimum` there, with 11 of 41 requests a seed queued. A p90 is infinite when
   a request of a seed was never served: on the imported network SUMO's background traffic
   jams (93 of 1,858 background vehicles of one run waited more than 1,000 s), and a taxi
   sent through such a jam does not reach its customer before the run ends. A dispatch is
