@@ -465,10 +465,10 @@ OpenStreetMap extract (`routing-svc import-osm ../shared/nets/badhersfeld.osm.xm
 bhosm.net.xml.gz`) and `bs3d` (the Braunschweig network of SUMO's game,
 `tools/game/bs3d`, `--net bs3d`), 3 seeds, 1 h of requests at 40/h, background 3
 vehicles/h/km, a history of 1,000, idle vehicles at the service's posts, measured with
-their own commands, not this report's runs. Bologna and the OSM import with 10 vehicles
-were measured on 2026-12-04 (`bb926d4`) with the co-simulation's defaults; the rows marked
-(†) on 2026-12-01 with the queue served oldest first (`--queue fifo` added to the command,
-the co-simulation's only order then), and not run again:
+their own commands, not this report's runs. Bologna and the OSM import were measured on
+2026-12-04 (`bb926d4`) with the co-simulation's defaults; the rows marked (†) on
+2026-12-01 with the queue served oldest first (`--queue fifo` added to the command, the
+co-simulation's only order then), and not run again:
 
 ```
 routing-svc cosim --net NET --mode MODE --vehicles N --hours 1 --rate 40 --density 3 \\
@@ -481,7 +481,7 @@ routing-svc cosim --net NET --mode MODE --vehicles N --hours 1 --rate 40 --densi
 | bologna incidents 10 | 0.39 | 110 / 211 | 152 / 298 | 106 / 199 | 0.72, 0.71, 1.04 |
 | OSM persons 10 | 0.69 | 418 / 919 | 546 / 1,431 | 456 / 925 | 0.77, 0.64, 0.92 |
 | OSM incidents 10 | 0.69 | 431 / 1,491 | 502 / inf | 400 / 956 | **0.86**, 0, **1.08** |
-| OSM incidents 20 (†, *) | 0.32 | 257 / inf | 333 / 1,675 | 269 / 937 | 0.77, **inf**, 0.95 |
+| OSM incidents 20 | 0.32 | 257 / inf | 333 / 1,675 | 269 / 937 | 0.77, **inf**, 0.95 |
 | bs3d rebuilt, persons 10 (†) | 0.24 | 45 / 81 | 84 / 150 | 51 / 88 | 0.54, 0.54, 0.88 |
 | bs3d rebuilt, incidents 10 (†) | 0.23 | 42 / 80 | 77 / 136 | 44 / 82 | 0.54, 0.59, 0.95 |
 | bs3d rebuilt, persons 20 (†) | 0.11 | 30 / 55 | 53 / 105 | 36 / 69 | 0.57, 0.52, 0.85 |
@@ -494,11 +494,9 @@ routing-svc cosim --net NET --mode MODE --vehicles N --hours 1 --rate 40 --densi
 Ratios: mean / `sumo-stop` (goal 0.8), p90 / `sumo-stop` (0.8), mean / `optimum` (1.05);
 missed in bold; 0 where `sumo-stop`'s p90 is infinite. Means are over the served requests.
 `bs3d`: as SUMO ships it; `bs3d rebuilt`: its traffic-light programs rebuilt (below).
-(*) Measured on `6fbbb96`, before the co-simulation fixes of `CHANGELOG.md`; not
-run again.
-
-- **Bologna and the OSM import.** `sa` meets 11 of the 15 checks. Bologna, where no request
-  waited in the queue, gave the figures of the oldest-first queue to the second. On the
+- **Bologna and the OSM import.** `sa` meets 11 of the 15 checks. Where no request waited
+  in the queue (Bologna, the imported network's incidents with 20 vehicles) the figures
+  are those of the oldest-first queue to the second. On the
   imported network the queue served soonest lowered `sa`'s p90 wait of incidents from
   infinite to 1,491 s and its mean from 453 to 431 s; `sa` still waits 1.08 times as long
   as `optimum` there, with 11 of 41 requests a seed queued. A p90 is infinite when
