@@ -99,12 +99,17 @@ class ConsolidationSolver:
         self._guard = threading.Lock()
         self._solving = False
         """Whether a job was submitted since the pool started (:meth:`close` waits)."""
+        self._loading: list[Future[bool]] = []
+        """The workers' loads that :meth:`start` submitted."""
 
     def start(self) -> list[Future[bool]]:
         """Start the workers now, each loading what a solve runs, so that the first
         consolidation after the service starts does not wait for a process to start and
         import the package (the service calls this at start-up)."""
-        return [self._submitted(_ready, solving=False) for _ in range(self.workers)]
+        loading = [self._submitted(_ready, solving=False) for _ in range(self.workers)]
+        with self._guard:
+            self._loading = loading
+        return loading
 
     def submit(self, job: ConsolidationJob[P]) -> Future[Consolidation[P]]:
         """Solve ``job`` in a worker; a pool whose worker died is started again."""
@@ -130,13 +135,16 @@ class ConsolidationSolver:
 
     def close(self) -> None:
         """Stop the workers; jobs not finished are dropped (their fleets are still due,
-        and solve again when the service comes back). Workers that only started
-        (:meth:`start`) are not waited for: they leave once loaded."""
+        and solve again when the service comes back). Workers still loading (:meth:`start`)
+        are not waited for: they leave once loaded. Idle workers are waited for, so that
+        the pool's queues are released before the process ends."""
         with self._guard:
             if self._pool is not None:
-                self._pool.shutdown(wait=self._solving, cancel_futures=True)
+                idle = all(f.done() for f in self._loading)
+                self._pool.shutdown(wait=self._solving or idle, cancel_futures=True)
                 self._pool = None
                 self._solving = False
+                self._loading = []
 
 
 @dataclass(frozen=True, slots=True)

@@ -8,6 +8,7 @@ solved solves it again and applies it later.
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import signal
 import threading
@@ -245,6 +246,20 @@ def test_started_workers_have_loaded_the_solver() -> None:
         assert [f.result(timeout=PATIENCE_S) for f in ready] == [True, True]
     finally:
         solver.close()
+
+
+def test_closing_waits_for_workers_that_finished_loading() -> None:
+    """Idle workers are stopped before ``close`` returns, so the pool releases its queues
+    (a pool left to stop on its own warns of leaked semaphores when the process ends)."""
+    before = set(multiprocessing.active_children())
+    solver = ConsolidationSolver(2)
+    try:
+        assert [f.result(timeout=PATIENCE_S) for f in solver.start()] == [True, True]
+        workers = [w for w in multiprocessing.active_children() if w not in before]
+        assert len(workers) == 2
+    finally:
+        solver.close()
+    assert [w for w in workers if w.is_alive()] == []
 
 
 def test_the_workers_start_with_the_service(tmp_path: Path) -> None:
