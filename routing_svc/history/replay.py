@@ -94,13 +94,13 @@ class InProcessHistoryClient(InProcessFleetClient):
         """The batch route's domain call on calls placed on the fleet's network already
         (:func:`~routing_svc.history.places.place_locally`): positions resolved as the
         route resolves them, the same request digest, and only the costs read back."""
+        if not 1 <= len(chunk.edges) <= MAX_CHUNK:
+            raise InvalidInput(f"a chunk holds 1 to {MAX_CHUNK} calls, got {len(chunk.edges)}")
         entry = self.service.network_of(fleet_id)
         resolved = [
-            (entry.resolve_edge(e, o), list(r) if r is not None else None)
+            (entry.resolve_edge(e, o), list(r) if r else None)  # as the route's targets
             for e, o, r in zip(chunk.edges, chunk.offsets, chunk.requires, strict=True)
         ]
-        if not 1 <= len(resolved) <= MAX_CHUNK:
-            raise InvalidInput(f"a chunk holds 1 to {MAX_CHUNK} calls, got {len(resolved)}")
         results, version = self.service.submit_resolved(
             fleet_id,
             resolved,
