@@ -449,9 +449,8 @@ done
 | stands / free | 0.99 / 0.91 | 1.11 / 1.10 | 1.10 / 1.09 | 1.08 / 1.04 |
 
 Every request was served (36, 47 and 39 of them), and no vehicle found its parkingArea
-full (`unparked` 0). Measured once before, with the queue served oldest first (`--queue
-fifo`) and seed 0 alone, the cost was 1.20 (mean) and 1.15 (p90); with today's queue
-seed 0 alone shows none, the other two seeds about 10 %.
+full (`unparked` 0). One seed alone carries the noise of one request stream: seed 0
+shows no cost, the other two about 10 %.
 """
 
 
@@ -494,12 +493,9 @@ routing-svc cosim --net NET --mode MODE --vehicles N --hours 1 --rate 40 --densi
 Ratios: mean / `sumo-stop` (goal 0.8), p90 / `sumo-stop` (0.8), mean / `optimum` (1.05);
 missed in bold; 0 where `sumo-stop`'s p90 is infinite. Means are over the served requests.
 `bs3d`: as SUMO ships it; `bs3d rebuilt`: its traffic-light programs rebuilt (below).
-- **Bologna and the OSM import.** `sa` meets 11 of the 15 checks. Where no request waited
-  in the queue (Bologna, the imported network's incidents with 20 vehicles) the figures
-  are those of the oldest-first queue to the second. On the
-  imported network the queue served soonest lowered `sa`'s p90 wait of incidents from
-  infinite to 1,491 s and its mean from 453 to 431 s; `sa` still waits 1.08 times as long
-  as `optimum` there, with 11 of 41 requests a seed queued. A p90 is infinite when
+- **Bologna and the OSM import.** `sa` meets 11 of the 15 checks. On the imported
+  network's incidents with 10 vehicles `sa` waits 1.08 times as long as `optimum`, with
+  11 of 41 requests a seed queued. A p90 is infinite when
   a request of a seed was never served: on the imported network SUMO's background traffic
   jams (93 of 1,858 background vehicles of one run waited more than 1,000 s), and a taxi
   sent through such a jam does not reach its customer before the run ends. A dispatch is
