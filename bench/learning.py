@@ -457,6 +457,7 @@ def rest_curve(
             "warning",
         ],
         env=os.environ.copy(),
+        stdout=sys.stderr,  # the server's banner must not mix with this script's JSON
     )
     base = f"http://127.0.0.1:{port}"
     try:
