@@ -767,6 +767,17 @@ class Fleet(Generic[P]):
             return None
         return _key(learning)
 
+    def scheduled_consolidation(self) -> tuple[int, int] | None:
+        """The target counts at which the next scheduled consolidation falls due and by
+        which, solved away from the fleet, it must be applied
+        (:meth:`ConsolidationPolicy.apply_by`); ``None`` for a fleet that does not
+        consolidate."""
+        learning, policy = self.state.learning, self.config.consolidation
+        if learning is None or policy is None or not self._consolidates():
+            return None
+        due = learning.next_consolidation
+        return due, policy.apply_by(due=due, epoch=learning.epoch, accepted_at=learning.accepted_at)
+
     def consolidation_job(self) -> ConsolidationJob[P] | None:
         """The due consolidation's inputs, copied (``None`` when none is due)."""
         key = self.due_consolidation()

@@ -157,6 +157,12 @@ class FleetService:
         runtime = self._cache.get(fleet_id)
         return None if runtime is None else runtime.consolidation_wait(targets_ahead)
 
+    def solves_within(self, fleet_id: str, targets_ahead: int) -> bool:
+        """Whether the fleet's next ``targets_ahead`` targets could wait for a solve
+        (:meth:`FleetRuntime.solves_within`); called under its lock."""
+        runtime = self._cache.get(fleet_id)
+        return runtime is not None and runtime.solves_within(targets_ahead)
+
     def runtime_for_write(self, fleet_id: str) -> FleetRuntime:
         """The fleet's runtime, loaded if it is not in memory, not caught up with the
         log (the append hands over what it missed); called under its lock."""

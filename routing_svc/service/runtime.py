@@ -164,6 +164,20 @@ class FleetRuntime:
             return None
         return pending.answer
 
+    def solves_within(self, targets_ahead: int) -> bool:
+        """Whether one of the fleet's next ``targets_ahead`` targets could wait for a
+        solve: the pending one's (:meth:`consolidation_wait`), or, with none pending, the
+        one scheduled to fall due among them if it must be applied before their end (or is
+        solved inline, without a solver)."""
+        if self._pending is not None:
+            return self.consolidation_wait(targets_ahead) is not None
+        scheduled = self.fleet.scheduled_consolidation()
+        if scheduled is None:
+            return False
+        due, apply_by = scheduled
+        last = self.fleet.state.targets + targets_ahead - 1  # seen when the last one comes
+        return last >= (due if self._solver is None else apply_by)
+
     def _hand_over_due(self) -> None:
         """Drop a job that was applied or went stale; hand the due consolidation, if
         any, to the solver (:mod:`~routing_svc.service.background_solver`)."""

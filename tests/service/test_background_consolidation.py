@@ -113,6 +113,36 @@ def test_a_consolidation_solved_off_the_write_path_is_applied_later_and_replayed
     assert {f["fleet"] for f in report["fleets"] if f["ok"]} == {"steady", "restarted"}
 
 
+def test_a_batch_past_the_epoch_s_first_consolidation_applies_it(tmp_path: Path) -> None:
+    """A new fleet's first consolidation, solved by the worker process, is applied by the
+    target after it fell due, inside the batch that made it due: a batch of a few
+    hundred targets does not leave the fleet where it started."""
+    client = start(f"sqlite:///{tmp_path / 'events.db'}", tmp_path)
+    try:
+        assert client.post("/v1/fleets", json=spread_fleet_body("new")).status_code == 201
+        r = client.post(
+            "/v1/fleets/new/targets:batch", json={"targets": hotspot_stream(FIRST + 50)}
+        )
+        assert r.status_code == 200, r.text
+        results = r.json()["results"]
+        assert [k for k, x in enumerate(results) if "consolidated" in x] == [FIRST]
+        record = results[FIRST]["consolidated"]
+        assert record["sample"] == FIRST and record["accepted"] is True
+        fleet = client.get("/v1/fleets/new").json()
+        positions = [(p["edge"], p["offset"]) for p in record["positions"]]
+        assert len(set(positions)) > 1
+        # moved only by the held steps of the 49 targets after it
+        kept = sum(
+            (v["position"]["edge"], v["position"]["offset"]) == q
+            for v, q in zip(fleet["vehicles"], positions, strict=True)
+        )
+        assert kept >= len(positions) - 49
+        replayed = client.app.state.fleets.verify("new")  # type: ignore[attr-defined]
+        assert replayed["version"] == fleet["version"] == FIRST + 51
+    finally:
+        client.__exit__(None, None, None)
+
+
 def test_a_consolidating_fleet_stores_its_larger_snapshot_less_often(tmp_path: Path) -> None:
     client = start(f"sqlite:///{tmp_path / 'events.db'}", tmp_path)
     try:
@@ -147,12 +177,21 @@ def test_a_solve_that_failed_in_its_worker_is_solved_on_the_write_path() -> None
     starts = [space.decode(t["position"]) for t in hotspot_stream(3)]
     fleet = Fleet.create(space, [(Vehicle(f"v{i}"), p) for i, p in enumerate(starts)], config)
     fleet.defer_consolidations = True
-    for body in hotspot_stream(FIRST):
-        fleet.observe(space.decode(body["position"]))
+    stream = [space.decode(body["position"]) for body in hotspot_stream(4 * FIRST)]
+    for target in stream[:FIRST]:
+        fleet.observe(target)
+    first = fleet.consolidation_job()
+    # due at the 250th target, the epoch's first: the next target applies it
+    assert first is not None and first.key == (0, FIRST) and first.apply_by == FIRST
+    fleet.observe(stream[FIRST], solved=(first.key, first.solve()))
+    for target in stream[FIRST + 1 :]:
+        if fleet.due_consolidation() is not None:
+            break
+        fleet.observe(target)
     job = fleet.consolidation_job()
-    assert job is not None
-    # due at the 250th target: applied by half the period after it (250 -> 500) at the latest
-    assert job.key == (0, FIRST) and job.apply_by == FIRST + FIRST // 2
+    assert job is not None and job.key[1] == fleet.state.targets
+    # the next ones: applied by half the period after them at the latest
+    assert job.apply_by == job.key[1] + FIRST // 2
     answer: Future[Any] = Future()
     pending = PendingConsolidation(job, answer)
     assert pending.solved(job.apply_by - 1) is None  # not finished, not late: the target goes on

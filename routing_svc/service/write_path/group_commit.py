@@ -6,22 +6,21 @@ all fleets in it in one transaction
 (:meth:`~routing_svc.store.event_log.EventLog.append_groups`), so one ``fsync``
 acknowledges them all.
 
-There are two writers. Requests made on an event loop's thread (the REST
-API's target routes) are written *by that event loop* on SQLite: it computes
-the group and stages its transaction itself, without waiting for any lock,
-and only the commit (the ``fsync``) runs on a worker thread, while the loop
-goes on serving requests. The targets' Python work thus stays on one thread
-instead of passing the interpreter lock back and forth with a writer thread
-for every target. The loop hands the interpreter lock to the committer for
-the few microseconds it needs to start the commit
-(:mod:`~routing_svc.service.write_path.committer`): CPython would otherwise let
-it run only when the loop next idles, after the loop parsed the next requests,
-so the disk's wait would follow that work instead of overlapping it. When
-staging is not possible at once (another thread or process holds the write
-lock, a fleet's lock is taken, a fleet is not in memory), the group goes to a
-worker thread as a whole. Every other request (from worker threads, and all of
-them on PostgreSQL, whose statements wait on the network) joins the queue of
-the writer thread.
+There are two writers. Requests made on an event loop's thread (the REST API's target
+routes) are written *by that event loop* on SQLite: it computes the group and stages its
+transaction itself, without waiting for any lock, and only the commit (the ``fsync``)
+runs on a worker thread, while the loop goes on serving requests. The targets' Python
+work thus stays on one thread instead of passing the interpreter lock back and forth
+with a writer thread for every target. The loop hands the interpreter lock to the
+committer for the few microseconds it needs to start the commit
+(:mod:`~routing_svc.service.write_path.committer`): CPython would otherwise let it run
+only when the loop next idles, after the loop parsed the next requests, so the disk's
+wait would follow that work instead of overlapping it. When staging is not possible at
+once (another thread or process holds the write lock, a fleet's lock is taken, a fleet
+is not in memory, a fleet's targets could wait for its consolidation's solve), the group
+goes to a worker thread as a whole. Every other request (from worker threads, and all of
+them on PostgreSQL, whose statements wait on the network) joins the queue of the writer
+thread.
 
 Under each fleet's lock the cached :class:`FleetRuntime` first replays the
 events other workers (or hosts) wrote since it last looked, then computes
@@ -35,7 +34,11 @@ computing) is dropped and rebuilt from the log.
 A fleet whose next targets would wait for its consolidation's solve (solved in a
 worker process, :mod:`~routing_svc.service.background_solver`) is held: its requests
 stay queued, in order, and the writers take the other fleets' meanwhile; the solve's
-end wakes them. So one fleet's wait never holds another fleet or the event loop.
+end wakes them. So one fleet's wait never holds another fleet or the event loop. A
+request that itself passes the point where a consolidation falls due and the point by
+which it must be applied (the epoch's first is applied at once) waits inside its
+transaction, on a worker thread: the event loop goes on answering, and the writes queued
+behind it follow it.
 
 The domain provides the fleets' runtimes and locks (:class:`FleetRuntimes`);
 it knows nothing else of how its requests are written.
@@ -108,6 +111,12 @@ class FleetRuntimes(Protocol):
     def consolidation_wait(self, fleet_id: str, targets_ahead: int) -> Future[Any] | None:
         """The consolidation solve that the fleet's next ``targets_ahead`` targets would
         wait for, ``None`` if none (or the fleet is not in memory)."""
+        ...
+
+    def solves_within(self, fleet_id: str, targets_ahead: int) -> bool:
+        """Whether one of the fleet's next ``targets_ahead`` targets could wait for a
+        consolidation's solve (one already handed over, or one that falls due among
+        them); called under its lock."""
         ...
 
     def runtime_for_write(self, fleet_id: str) -> FleetRuntime:
@@ -420,8 +429,9 @@ class GroupCommit:
         """Stage the batch's transaction here, commit it on the committer thread.
 
         Staging never waits: the fleets' locks and the database's write lock
-        are only tried. If one is taken, or a fleet is not in memory, or the
-        transaction fails, the batch goes to a worker thread as a whole
+        are only tried. If one is taken, or a fleet is not in memory, or a fleet's
+        targets could wait for a solve, or the transaction fails, the batch goes to a
+        worker thread as a whole
         (:meth:`_commit`), after any runtime the staging changed was dropped.
         """
         loop = asyncio.get_running_loop()
@@ -437,6 +447,9 @@ class GroupCommit:
                     ready = False
                     break
                 held.append(lock)
+                if self.runtimes.solves_within(fleet_id, sum(p.size for p in by_fleet[fleet_id])):
+                    ready = False  # its wait must not hold the event loop
+                    break
             if ready:
                 opened = None
                 try:
