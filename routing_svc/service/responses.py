@@ -179,6 +179,17 @@ class StandAnswer(Answer):
     )
 
 
+class ConsolidationAnswer(Answer):
+    """A ``consolidating`` fleet's next consolidation (``docs/learning.md``)."""
+
+    due_at: int = Field(description="The target count at which it falls due.")
+    apply_by: int = Field(
+        description="The target count by which it is applied when targets come faster than "
+        "it is solved: at once for the epoch's first, else half the period after ``due_at``."
+    )
+    solving: bool = Field(description="Whether it is due and being solved in a worker.")
+
+
 class FleetAnswer(Answer):
     """A fleet: its configuration, version, target count and vehicles."""
 
@@ -201,6 +212,9 @@ class FleetAnswer(Answer):
     stands: list[StandAnswer] | None = Field(
         description="The stands the vehicles park at (stands at one position merged, their "
         "capacities added), each with the vehicles at it; null: vehicles park anywhere.",
+    )
+    consolidation: ConsolidationAnswer | None = Field(
+        description="The next consolidation; null for a fleet that does not consolidate."
     )
 
 

@@ -356,6 +356,20 @@ class FleetRuntime:
             "vehicles": [self._vehicle_view(i) for i in range(len(self.fleet.vehicles))],
             "reference_demand": None if self.reference is None else self.reference["demand"],
             "stands": self._stands_view(),
+            "consolidation": self._consolidation_view(),
+        }
+
+    def _consolidation_view(self) -> dict[str, Any] | None:
+        """The next consolidation (:meth:`Fleet.scheduled_consolidation`) and whether it is
+        being solved; ``None`` for a fleet that does not consolidate."""
+        scheduled = self.fleet.scheduled_consolidation()
+        if scheduled is None:
+            return None
+        pending = self._pending
+        return {
+            "due_at": scheduled[0],
+            "apply_by": scheduled[1],
+            "solving": pending is not None and not pending.answer.done(),
         }
 
     def _stands_view(self) -> list[dict[str, Any]] | None:

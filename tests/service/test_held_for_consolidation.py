@@ -52,7 +52,8 @@ def second_due(
 ) -> tuple[ConsolidationJob[Any], Future[Any]]:
     """Post ``stream`` until the epoch's second consolidation falls due, answering the
     first (applied at once, by the target after it fell due); its job and answer."""
-    post_batches(client, fleet_id, stream[:FIRST])
+    seen = client.get(f"/v1/fleets/{fleet_id}").json()["targets"]
+    post_batches(client, fleet_id, stream[seen:FIRST])
     [(first, answer)] = solver.jobs  # due at the 250th target, handed to the solver
     assert first.apply_by == FIRST  # the epoch's first: the next target waits for it
     answer.set_result(first.solve())
@@ -218,3 +219,31 @@ def test_a_batch_that_reaches_a_due_consolidation_waits_off_the_event_loop(
     assert r.status_code == 200, r.text
     results = r.json()["results"]
     assert [k for k, x in enumerate(results) if "consolidated" in x] == [FIRST]
+
+
+def test_a_fleet_shows_its_next_consolidation(
+    db_url: str, make_client: Callable[..., TestClient]
+) -> None:
+    client = make_client(db_url)
+    solver = HandSolver()
+    client.app.state.fleets.solver = solver  # type: ignore[attr-defined]
+    assert client.post("/v1/fleets", json=spread_fleet_body("f")).status_code == 201
+    probe = spread_fleet_body("p", rule="probe")
+    assert client.post("/v1/fleets", json=probe).status_code == 201
+
+    def view(fleet_id: str) -> Any:
+        r = client.get(f"/v1/fleets/{fleet_id}")
+        assert r.status_code == 200, r.text
+        return r.json()["consolidation"]
+
+    assert view("p") is None  # the probe rule does not consolidate
+    assert view("f") == {"due_at": FIRST, "apply_by": FIRST, "solving": False}
+    stream = hotspot_stream(4 * FIRST)
+    post_batches(client, "f", stream[: FIRST - 1])
+    assert view("f")["solving"] is False  # not due yet
+    post_batches(client, "f", stream[FIRST - 1 : FIRST])
+    assert view("f") == {"due_at": FIRST, "apply_by": FIRST, "solving": True}
+    job, answer = second_due(client, solver, "f", stream)  # answers the first on its way
+    assert view("f") == {"due_at": job.key[1], "apply_by": job.apply_by, "solving": True}
+    answer.set_result(job.solve())
+    assert view("f") == {"due_at": job.key[1], "apply_by": job.apply_by, "solving": False}
