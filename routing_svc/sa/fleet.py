@@ -781,16 +781,13 @@ class Fleet(Generic[P]):
     def consolidation_job(self) -> ConsolidationJob[P] | None:
         """The due consolidation's inputs, copied (``None`` when none is due)."""
         key = self.due_consolidation()
+        scheduled = self.scheduled_consolidation()
         learning, policy, state = self.state.learning, self.config.consolidation, self.state
-        if key is None or learning is None or policy is None:
+        if key is None or scheduled is None or learning is None or policy is None:
             return None
         return ConsolidationJob(
             key=key,
-            apply_by=policy.apply_by(
-                due=learning.next_consolidation,
-                epoch=learning.epoch,
-                accepted_at=learning.accepted_at,
-            ),
+            apply_by=scheduled[1],
             space=cast(SampleSpace[P], self.space),
             positions=tuple(state.positions),
             anchor=tuple(learning.anchor),

@@ -160,9 +160,13 @@ class FleetRuntime:
         (:meth:`PendingConsolidation.holds`; the last of them comes when the fleet has seen
         ``targets_ahead - 1`` more), else ``None``."""
         pending = self._pending
-        if pending is None or not pending.holds(self.fleet.state.targets + targets_ahead - 1):
+        if pending is None or not pending.holds(self._seen_by_last(targets_ahead)):
             return None
         return pending.answer
+
+    def _seen_by_last(self, targets_ahead: int) -> int:
+        """Targets the fleet has seen when the last of its next ``targets_ahead`` comes."""
+        return self.fleet.state.targets + targets_ahead - 1
 
     def solves_within(self, targets_ahead: int) -> bool:
         """Whether one of the fleet's next ``targets_ahead`` targets could wait for a
@@ -175,8 +179,7 @@ class FleetRuntime:
         if scheduled is None:
             return False
         due, apply_by = scheduled
-        last = self.fleet.state.targets + targets_ahead - 1  # seen when the last one comes
-        return last >= (due if self._solver is None else apply_by)
+        return self._seen_by_last(targets_ahead) >= (due if self._solver is None else apply_by)
 
     def _hand_over_due(self) -> None:
         """Drop a job that was applied or went stale; hand the due consolidation, if
