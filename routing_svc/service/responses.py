@@ -187,7 +187,6 @@ class ConsolidationAnswer(Answer):
         description="The target count by which it is applied when targets come faster than "
         "it is solved: at once for the epoch's first, else half the period after ``due_at``."
     )
-    solving: bool = Field(description="Whether it is due and being solved in a worker.")
 
 
 class FleetAnswer(Answer):

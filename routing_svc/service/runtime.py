@@ -363,17 +363,12 @@ class FleetRuntime:
         }
 
     def _consolidation_view(self) -> dict[str, Any] | None:
-        """The next consolidation (:meth:`Fleet.scheduled_consolidation`) and whether it is
-        being solved; ``None`` for a fleet that does not consolidate."""
+        """The next consolidation (:meth:`Fleet.scheduled_consolidation`); ``None`` for a
+        fleet that does not consolidate."""
         scheduled = self.fleet.scheduled_consolidation()
         if scheduled is None:
             return None
-        pending = self._pending
-        return {
-            "due_at": scheduled[0],
-            "apply_by": scheduled[1],
-            "solving": pending is not None and not pending.answer.done(),
-        }
+        return {"due_at": scheduled[0], "apply_by": scheduled[1]}
 
     def _stands_view(self) -> list[dict[str, Any]] | None:
         """Each stand as the API shows it: its ``position``, ``capacity`` and the ids of the
