@@ -23,7 +23,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from routing_svc.errors import InvalidInput, UnknownEdge, Unreachable
 from routing_svc.network.compile import CompiledNetwork
-from routing_svc.types import FloatArray, IntArray, NetPosition
+from routing_svc.types import FloatArray, Int32Array, IntArray, NetPosition
 
 __all__ = [
     "CostKind",
@@ -38,7 +38,7 @@ __all__ = [
 CostKind = Literal["length", "time"]
 
 _MATRIX_CELLS = 4_000_000
-_ROW_MEMO_BYTES = 64 * 2**20
+_ROW_MEMO_BYTES = 256 * 2**20
 
 
 @dataclass(frozen=True, eq=False)
@@ -244,14 +244,25 @@ class DistanceRows:
 
     def _to_starts(self, to_ends: FloatArray) -> FloatArray:
         """Distances to the ends of edges made distances to their starts."""
-        indptr, preds = self.network.rev_indptr, self.network.rev_indices
-        if preds.shape[0] == 0:
-            return np.full_like(to_ends, np.inf)
-        out = np.minimum.reduceat(
-            to_ends[:, preds], np.minimum(indptr[:-1], preds.shape[0] - 1), axis=1
-        )
-        out[:, indptr[:-1] == indptr[1:]] = np.inf
+        out = np.empty_like(to_ends)
+        _least_over_predecessors(to_ends, self.network.rev_indptr, self.network.rev_indices, out)
         return out
+
+
+@njit(cache=True, nogil=True)
+def _least_over_predecessors(
+    to_ends: FloatArray, indptr: Int32Array, preds: Int32Array, out: FloatArray
+) -> None:
+    """``out[r, e]``: the least ``to_ends[r, p]`` over the predecessors ``p`` of edge ``e``
+    (``preds[indptr[e]:indptr[e + 1]]``), ``inf`` for an edge without one."""
+    for r in range(to_ends.shape[0]):
+        row = to_ends[r]
+        for e in range(out.shape[1]):
+            least = np.inf
+            for k in range(indptr[e], indptr[e + 1]):
+                if row[preds[k]] < least:
+                    least = row[preds[k]]
+            out[r, e] = least
 
 
 def cost_matrix(

@@ -10,7 +10,7 @@ import pytest
 
 from routing_svc.errors import InvalidInput, UnknownEdge
 from routing_svc.network import RoadSpace
-from routing_svc.network.costs import DistanceRows
+from routing_svc.network.costs import DistanceRows, _least_over_predecessors
 from routing_svc.sa.space import Requirement
 from routing_svc.types import NetPosition
 from tests.network.conftest import NetCase
@@ -345,3 +345,13 @@ def test_an_unpickled_space_is_kept_for_the_same_network_and_costs(drt_case: Net
     np.testing.assert_array_equal(
         other.cost_matrix(sources, targets), slower.cost_matrix(sources, targets)
     )
+
+
+def test_distance_to_an_edge_start_is_the_least_over_its_predecessors_by_hand() -> None:
+    to_ends = np.array([[3.0, 1.0, np.inf, 7.0], [0.5, 2.0, 4.0, np.inf]])
+    # edge 0 <- {0, 1}; edge 1 <- none; edge 2 <- {3}; edge 3 <- {2}
+    indptr = np.array([0, 2, 2, 3, 4], dtype=np.int32)
+    preds = np.array([0, 1, 3, 2], dtype=np.int32)
+    out = np.empty_like(to_ends)
+    _least_over_predecessors(to_ends, indptr, preds, out)
+    np.testing.assert_array_equal(out, [[1.0, np.inf, 7.0, np.inf], [0.5, np.inf, np.inf, 4.0]])
