@@ -12,17 +12,17 @@ import math
 import threading
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Literal
 
 import numpy as np
 from numba import njit
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import dijkstra
 
 from routing_svc.errors import InvalidInput, UnknownEdge, Unreachable
 from routing_svc.network.compile import CompiledNetwork
+from routing_svc.network.heap import heap_pop, heap_push
 from routing_svc.types import FloatArray, Int32Array, IntArray, NetPosition
 
 __all__ = [
@@ -39,6 +39,7 @@ CostKind = Literal["length", "time"]
 
 _MATRIX_CELLS = 4_000_000
 _ROW_MEMO_BYTES = 256 * 2**20
+_ROWS_PER_THREAD = 16
 
 
 @dataclass(frozen=True, eq=False)
@@ -171,14 +172,6 @@ def position_arrays(
     return edges, offsets
 
 
-def _edge_graph(network: CompiledNetwork, costs: EdgeCosts) -> csr_matrix:
-    """Arc ``x -> y`` weighs ``cost[y]``: distances run from the end of the source edge."""
-    return csr_matrix(
-        (costs.cost[network.fwd_indices], network.fwd_indices, network.fwd_indptr),
-        shape=(network.n_edges, network.n_edges),
-    )
-
-
 class DistanceRows:
     """Shortest-path rows from edge ends on one network under fixed edge costs, with a
     bounded memo.
@@ -196,7 +189,6 @@ class DistanceRows:
     ) -> None:
         self.network = network
         self.costs = costs
-        self._graph: csr_matrix | None = None
         self._memo: OrderedDict[int, FloatArray] = OrderedDict()
         self._capacity = max_bytes // (8 * max(network.n_edges, 1))
         self._lock = threading.Lock()
@@ -225,11 +217,7 @@ class DistanceRows:
                     self._memo.move_to_end(edge)
                     out[k] = row if columns is None else row[columns]
         if missing:
-            if self._graph is None:
-                self._graph = _edge_graph(self.network, self.costs)
-            found = self._to_starts(
-                np.atleast_2d(dijkstra(self._graph, directed=True, indices=edges[missing]))
-            )
+            found = self._to_starts(self._edge_end_rows(edges[missing]))
             out[missing] = found if columns is None else found[:, columns]
             if self._capacity == 0:
                 return out
@@ -240,6 +228,24 @@ class DistanceRows:
                     self._memo[int(edges[k])] = row
                 while len(self._memo) > self._capacity:
                     self._memo.popitem(last=False)
+        return out
+
+    def _edge_end_rows(self, sources: IntArray) -> FloatArray:
+        """Costs from the end of each edge of ``sources`` to the end of every edge, the
+        sources shared between two threads (:func:`_edge_end_rows` holds no GIL)."""
+        network = self.network
+        out = np.empty((sources.shape[0], network.n_edges))
+        graph = (network.fwd_indptr, network.fwd_indices, self.costs.cost)
+        half = sources.shape[0] // 2
+        if half < _ROWS_PER_THREAD:
+            _edge_end_rows(*graph, sources, out)
+            return out
+        with ThreadPoolExecutor(2) as pool:
+            for done in [
+                pool.submit(_edge_end_rows, *graph, sources[:half], out[:half]),
+                pool.submit(_edge_end_rows, *graph, sources[half:], out[half:]),
+            ]:
+                done.result()
         return out
 
     def _to_starts(self, to_ends: FloatArray) -> FloatArray:
@@ -263,6 +269,38 @@ def _least_over_predecessors(
                 if row[preds[k]] < least:
                     least = row[preds[k]]
             out[r, e] = least
+
+
+@njit(cache=True, nogil=True)
+def _edge_end_rows(
+    indptr: Int32Array, successors: Int32Array, cost: FloatArray, sources: IntArray, out: FloatArray
+) -> None:
+    """``out[r]``: Dijkstra costs from the end of edge ``sources[r]`` to the end of every
+    edge, arc ``x -> y`` weighing ``cost[y]`` (``successors[indptr[x]:indptr[x + 1]]``);
+    ``inf`` where none leads."""
+    n = indptr.shape[0] - 1
+    keys = np.empty(successors.shape[0] + 1)
+    nodes = np.empty(successors.shape[0] + 1, dtype=np.int32)
+    settled = np.zeros(n, dtype=np.bool_)
+    for r in range(sources.shape[0]):
+        dist = out[r]
+        dist[:] = np.inf
+        settled[:] = False
+        source = sources[r]
+        dist[source] = 0.0
+        size = heap_push(keys, nodes, 0, 0.0, source)
+        while size > 0:
+            here, node = keys[0], nodes[0]
+            size = heap_pop(keys, nodes, size)
+            if settled[node]:
+                continue
+            settled[node] = True
+            for k in range(indptr[node], indptr[node + 1]):
+                nxt = successors[k]
+                through = here + cost[nxt]
+                if through < dist[nxt]:
+                    dist[nxt] = through
+                    size = heap_push(keys, nodes, size, through, nxt)
 
 
 def cost_matrix(

@@ -7,10 +7,17 @@ import pickle
 
 import numpy as np
 import pytest
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
 
 from routing_svc.errors import InvalidInput, UnknownEdge
 from routing_svc.network import RoadSpace
-from routing_svc.network.costs import DistanceRows, _least_over_predecessors
+from routing_svc.network.costs import (
+    _ROWS_PER_THREAD,
+    DistanceRows,
+    EdgeCosts,
+    _least_over_predecessors,
+)
 from routing_svc.sa.space import Requirement
 from routing_svc.types import NetPosition
 from tests.network.conftest import NetCase
@@ -355,3 +362,25 @@ def test_distance_to_an_edge_start_is_the_least_over_its_predecessors_by_hand() 
     out = np.empty_like(to_ends)
     _least_over_predecessors(to_ends, indptr, preds, out)
     np.testing.assert_array_equal(out, [[1.0, np.inf, 7.0, np.inf], [0.5, np.inf, np.inf, 4.0]])
+
+
+@pytest.mark.parametrize("zeroed", [0.0, 0.2])
+def test_edge_end_rows_equal_scipy_dijkstra_bit_for_bit(
+    case: NetCase, space: RoadSpace, zeroed: float
+) -> None:
+    """The compiled rows against scipy's Dijkstra on the same arcs (arc ``x -> y`` weighs
+    ``cost[y]``), some edges costing nothing, and with the sources split between threads."""
+    network = case.network
+    rng = np.random.default_rng(23)
+    cost = space.edge_costs.cost.copy()
+    cost[rng.random(network.n_edges) < zeroed] = 0.0
+    costs = EdgeCosts(space.edge_costs.kind, cost, space.edge_costs.rate)
+    graph = csr_matrix(
+        (cost[network.fwd_indices], network.fwd_indices, network.fwd_indptr),
+        shape=(network.n_edges, network.n_edges),
+    )
+    for n_sources in (3, 2 * _ROWS_PER_THREAD + 5):
+        sources = rng.integers(network.n_edges, size=n_sources).astype(np.int64)
+        expected = dijkstra(graph, directed=True, indices=sources)
+        rows = DistanceRows(network, costs, max_bytes=0)._edge_end_rows(sources)
+        np.testing.assert_array_equal(rows, expected)
