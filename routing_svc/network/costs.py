@@ -40,6 +40,7 @@ CostKind = Literal["length", "time"]
 _MATRIX_CELLS = 4_000_000
 _ROW_MEMO_BYTES = 256 * 2**20
 _ROWS_PER_THREAD = 16
+"""Rows a thread computes at least, when the rows to compute are shared between two."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -232,18 +233,18 @@ class DistanceRows:
 
     def _edge_end_rows(self, sources: IntArray) -> FloatArray:
         """Costs from the end of each edge of ``sources`` to the end of every edge, the
-        sources shared between two threads (:func:`_edge_end_rows` holds no GIL)."""
+        sources shared between two threads (:func:`_dijkstra_from_edge_ends` holds no GIL)."""
         network = self.network
         out = np.empty((sources.shape[0], network.n_edges))
         graph = (network.fwd_indptr, network.fwd_indices, self.costs.cost)
         half = sources.shape[0] // 2
         if half < _ROWS_PER_THREAD:
-            _edge_end_rows(*graph, sources, out)
+            _dijkstra_from_edge_ends(*graph, sources, out)
             return out
         with ThreadPoolExecutor(2) as pool:
             for done in [
-                pool.submit(_edge_end_rows, *graph, sources[:half], out[:half]),
-                pool.submit(_edge_end_rows, *graph, sources[half:], out[half:]),
+                pool.submit(_dijkstra_from_edge_ends, *graph, sources[:half], out[:half]),
+                pool.submit(_dijkstra_from_edge_ends, *graph, sources[half:], out[half:]),
             ]:
                 done.result()
         return out
@@ -272,12 +273,13 @@ def _least_over_predecessors(
 
 
 @njit(cache=True, nogil=True)
-def _edge_end_rows(
+def _dijkstra_from_edge_ends(
     indptr: Int32Array, successors: Int32Array, cost: FloatArray, sources: IntArray, out: FloatArray
 ) -> None:
     """``out[r]``: Dijkstra costs from the end of edge ``sources[r]`` to the end of every
     edge, arc ``x -> y`` weighing ``cost[y]`` (``successors[indptr[x]:indptr[x + 1]]``);
-    ``inf`` where none leads."""
+    ``inf`` where none leads. An edge enters the heap again only when its cost improves,
+    at most once per arc, so the heap holds at most one entry per arc and the source."""
     n = indptr.shape[0] - 1
     keys = np.empty(successors.shape[0] + 1)
     nodes = np.empty(successors.shape[0] + 1, dtype=np.int32)
