@@ -305,7 +305,7 @@ class RoadSpace:
     ) -> FloatArray:
         """Directed costs from every source to every target, shape ``(len(sources), len(targets))``.
 
-        Uses scipy's Dijkstra, one run per distinct source edge not among the space's
+        One compiled Dijkstra per distinct source edge not among the space's
         recently used ones (see :func:`routing_svc.network.costs.cost_matrix`).
         """
         edges, offsets = position_arrays(self.network, sources, what="source")

@@ -15,9 +15,9 @@ that a burst of targets does not outrun the schedule, and for the epoch's first 
 started); the write path keeps such a fleet's writes queued meanwhile
 (:meth:`PendingConsolidation.holds`) and goes on with the other fleets'.
 
-Processes, not threads: much of the solve (scipy's Dijkstra, the Python around the
-compiled interchange, whose kernels alone release the GIL) holds the GIL, and a thread
-would stall the write path almost as much as solving inline.
+Processes, not threads: much of the solve (the Python around the compiled shortest paths
+and interchange, whose kernels alone release the GIL) holds the GIL, and a thread would
+stall the write path almost as much as solving inline.
 """
 
 from __future__ import annotations
