@@ -59,6 +59,10 @@ from routing_svc.types import FloatArray, Int32Array, IntArray, NetPosition
 
 __all__ = ["RoadSpace"]
 
+_TWIN_BLOCK_CELLS = 2**24
+"""Cells of the twin sources' costs :meth:`RoadSpace.cost_matrix` holds at a time: the
+either-way minimum takes no second matrix of the whole size."""
+
 
 _TYPICAL_SEED = 0
 _TYPICAL_SOURCES = 32
@@ -314,10 +318,12 @@ class RoadSpace:
         if self.either_way and edges.size:
             twin_edges, twin_offsets = twin_columns(self.network, edges, offsets)
             rows = np.flatnonzero(twin_edges >= 0)
-            if rows.size:
-                alt = cost_matrix(self._rows, (twin_edges[rows], twin_offsets[rows]), columns)
-                np.minimum(costs[rows], alt, out=alt)
-                costs[rows] = alt
+            block = max(1, _TWIN_BLOCK_CELLS // max(costs.shape[1], 1))
+            for lo in range(0, rows.size, block):
+                part = rows[lo : lo + block]
+                alt = cost_matrix(self._rows, (twin_edges[part], twin_offsets[part]), columns)
+                np.minimum(costs[part], alt, out=alt)
+                costs[part] = alt
         return costs
 
     def advance(

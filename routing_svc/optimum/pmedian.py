@@ -198,6 +198,8 @@ def _validated(costs: FloatArray, weights: FloatArray, p: int) -> tuple[FloatArr
     if not 1 <= p <= c.shape[0]:
         raise InvalidInput(f"p must be between 1 and the number of sites ({c.shape[0]}), got {p}")
     keep = w > 0
+    if keep.all():  # the matrix itself (the solvers only read it), not a copy
+        return np.ascontiguousarray(c), w
     return np.ascontiguousarray(c[:, keep]), w[keep]
 
 

@@ -123,7 +123,9 @@ def solve_demand(
     )
     if not distinct:
         _check_fleet(p, len(offered), "candidate sites")
-    matrix = space.cost_matrix(offered, list(demand.positions)) ** power
+    matrix = space.cost_matrix(offered, list(demand.positions))
+    if power != 1.0:  # ``d ** 1`` is ``d``: no second matrix of a large network's size
+        matrix = matrix**power
     if distinct:
         rows = distinct_rows(matrix)
         _check_fleet(p, int(rows.size), "distinct candidate sites")

@@ -8,9 +8,11 @@ smaller networkx cost of the position and its twin.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import sumolib
 
 from routing_svc.network import RoadSpace
+from routing_svc.network import space as space_module
 from routing_svc.sa.requirements import build_requirement
 from routing_svc.types import NetPosition
 from tests.network.conftest import NetCase
@@ -72,6 +74,29 @@ def test_either_way_costs_match_networkx(case: NetCase) -> None:
         assert found.served_by == (best,)
         np.testing.assert_allclose(found.completion_time, expected[best], rtol=1e-9)
         np.testing.assert_allclose(space.cost_matrix(vehicles, [target])[:, 0], expected, rtol=1e-9)
+
+
+def test_either_way_matrix_in_blocks_matches_networkx(
+    case: NetCase, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Blocks of two twin rows at a time, as a large network's matrix is filled."""
+    targets_count = 12
+    monkeypatch.setattr(space_module, "_TWIN_BLOCK_CELLS", 2 * targets_count)
+    space = RoadSpace(case.network)
+    twins = sumolib_twins(case)
+    ref = case.reference
+    costs = ref.edge_costs(kind="length")
+    weighted = ref.weighted(costs)
+    rng = np.random.default_rng(29)
+    sources = case.random_positions(rng, 25)
+    targets = case.random_positions(rng, targets_count)
+    assert sum(case.network.edge_ids[s.edge] in twins for s in sources) > 2  # several blocks
+    expected = np.empty((len(sources), len(targets)))
+    for j, target in enumerate(targets):
+        start = ref.start_costs(case.ids(target), costs, weighted)
+        for i, source in enumerate(sources):
+            expected[i, j] = reference_cost(case, twins, source, target, start, costs)
+    np.testing.assert_allclose(space.cost_matrix(sources, targets), expected, rtol=1e-9)
 
 
 def test_either_way_never_costs_more_than_forward_only(case: NetCase) -> None:
