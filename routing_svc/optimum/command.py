@@ -9,8 +9,11 @@
 prints one JSON object: the expected cost of the best configuration found
 (``objective``, in metres or seconds), the vehicle positions (SUMO edge id,
 offset, x, y), how it was found (``method``, ``proven_optimal``,
-``lower_bound``, ``seconds``) and the problem size (``n_sites``,
-``n_demand``). With ``--stands`` the vehicles park at the usable stands of a SUMO
+``lower_bound``, ``seconds``) and the problem size (``n_sites`` offered after
+subsampling and merging identical rows, ``candidate_sites`` before, ``n_demand``).
+Without ``--max-sites`` every candidate site is offered, or where their cost matrix
+would exceed :data:`~routing_svc.optimum.solve.MATRIX_BYTES` as many as it holds.
+With ``--stands`` the vehicles park at the usable stands of a SUMO
 additional file (read as ``routing-svc stands`` reads it), within their
 capacities (:func:`~routing_svc.optimum.stands.solve_stands`; one position per
 vehicle, repeated at a stand that holds several); the report adds the stands
@@ -35,9 +38,10 @@ from routing_svc.network import CompiledNetwork, RoadSpace, load_network
 from routing_svc.network.catalogue import resolve_network
 from routing_svc.network.costs import CostKind
 from routing_svc.network.stands import usable_stands
+from routing_svc.optimum.candidates import candidate_sites
 from routing_svc.optimum.evaluate import expected_cost
 from routing_svc.optimum.pmedian import Method
-from routing_svc.optimum.solve import DemandOptimum, solve_demand
+from routing_svc.optimum.solve import DemandOptimum, sites_that_fit, solve_demand
 from routing_svc.optimum.stands import solve_stands
 from routing_svc.types import NetPosition
 
@@ -68,7 +72,12 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     parser.add_argument("--seed", type=int, default=0, help="seed for the hotspot centres")
     parser.add_argument("--method", choices=tuple(_METHODS), default="auto")
     parser.add_argument(
-        "--max-sites", type=int, default=None, metavar="N", help="subsample the candidate sites"
+        "--max-sites",
+        type=int,
+        default=None,
+        metavar="N",
+        help="subsample the candidate sites (default: every one, or as many as a cost "
+        "matrix of 4 GiB holds)",
     )
     parser.add_argument(
         "--time-limit", type=float, default=60.0, metavar="SECONDS", help="for the exact method"
@@ -130,7 +139,8 @@ def optimum_report(
     method : {"auto", "milp", "heuristic"}
         See :func:`~routing_svc.optimum.pmedian.solve_pmedian`.
     max_sites : int, optional
-        Subsample the candidate sites to at most this many.
+        Subsample the candidate sites to at most this many; by default every one, or
+        as many as :func:`~routing_svc.optimum.solve.sites_that_fit` the demand.
     time_limit : float
         Seconds for the exact method.
     stands : Path, optional
@@ -164,6 +174,9 @@ def optimum_report(
     distribution = network_demand(network, recipe, rng=np.random.default_rng(seed))
     reading = None if stands is None else usable_stands(stands, network, vehicles)
     space = RoadSpace(network, cost=_COSTS[cost])
+    offered = len(candidate_sites(network, distribution))
+    if max_sites is None and offered > sites_that_fit(len(distribution)):
+        max_sites = sites_that_fit(len(distribution))
     free = solve_demand(
         space,
         distribution,
@@ -198,6 +211,7 @@ def optimum_report(
         "proven_optimal": solution.proven_optimal,
         "seconds": solution.seconds,
         "n_sites": len(best.sites),
+        "candidate_sites": offered,
         "n_demand": len(distribution),
         "seed": seed,
     }

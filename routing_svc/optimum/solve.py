@@ -43,6 +43,15 @@ MAX_SITES = 1500
 """Candidate sites kept on a road network (subsampled deterministically beyond);
 ``solve_pmedian`` is exact up to ``MILP_MAX_SITES`` and heuristic above."""
 
+MATRIX_BYTES = 4 * 2**30
+"""The largest site-by-atom cost matrix solved (the heuristics hold its transpose too)."""
+
+
+def sites_that_fit(atoms: int) -> int:
+    """The most candidate sites whose cost matrix to ``atoms`` demand atoms fits in
+    :data:`MATRIX_BYTES`."""
+    return max(1, MATRIX_BYTES // (8 * max(atoms, 1)))
+
 
 @dataclass(frozen=True, slots=True)
 class DemandOptimum(Generic[P]):
@@ -113,7 +122,8 @@ def solve_demand(
     Raises
     ------
     InvalidInput
-        More vehicles than (distinct) candidate sites, or anything
+        More vehicles than (distinct) candidate sites, a cost matrix larger than
+        :data:`MATRIX_BYTES`, or anything
         :func:`candidate_sites` or :func:`solve_pmedian` rejects.
     TypeError
         ``sites`` omitted for a space that is not a road network.
@@ -121,6 +131,14 @@ def solve_demand(
     offered: list[P] = (
         list(sites) if sites is not None else _network_sites(space, demand, max_sites)
     )
+    atoms = len(demand.positions)
+    if len(offered) > sites_that_fit(atoms):
+        raise InvalidInput(
+            f"the cost matrix of {len(offered)} candidate sites x {atoms} demand atoms would "
+            f"take {8 * len(offered) * atoms / 2**30:.1f} GiB, over the "
+            f"{MATRIX_BYTES / 2**30:g} GiB solved: offer at most {sites_that_fit(atoms)} sites "
+            "(max_sites, --max-sites)"
+        )
     if not distinct:
         _check_fleet(p, len(offered), "candidate sites")
     matrix = space.cost_matrix(offered, list(demand.positions))

@@ -10,8 +10,10 @@ import pytest
 
 from routing_svc.cli import main
 from routing_svc.demand import from_weights_file, uniform_by_length
+from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork, RoadSpace
-from routing_svc.optimum import expected_cost
+from routing_svc.optimum import expected_cost, solve_demand
+from routing_svc.optimum import solve as solve_module
 from routing_svc.types import NetPosition
 from tests.optimum.conftest import DRT_NET
 
@@ -120,3 +122,39 @@ def test_missing_network_and_bad_weights_file(
     bad.write_text("edge,weight\nno-such-edge,1\n")
     code, _, err = run_cli(capsys, "--vehicles", "2", "--demand", str(bad))
     assert code == 2 and "bad.csv line 2" in err and "no-such-edge" in err
+
+
+@pytest.mark.usefixtures("cache")
+def test_without_max_sites_a_large_problem_is_offered_the_sites_its_matrix_budget_holds(
+    capsys: pytest.CaptureFixture[str],
+    drt_network: CompiledNetwork,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    atoms = len(uniform_by_length(drt_network))
+    monkeypatch.setattr(solve_module, "MATRIX_BYTES", 8 * atoms * 200)
+    code, out, err = run_cli(capsys, "--vehicles", "3")
+    assert code == 0, err
+    report = json.loads(out)
+    assert report["candidate_sites"] > 200 and report["n_sites"] <= 200
+    code, out, err = run_cli(capsys, "--vehicles", "3", "--max-sites", "200")
+    assert code == 0, err
+    explicit = json.loads(out)
+    assert report["positions"] == explicit["positions"]
+    assert report["objective"] == explicit["objective"]
+
+
+@pytest.mark.usefixtures("cache")
+def test_sites_whose_matrix_exceeds_the_budget_are_one_line_and_exit_code_2(
+    capsys: pytest.CaptureFixture[str],
+    drt_network: CompiledNetwork,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    atoms = len(uniform_by_length(drt_network))
+    monkeypatch.setattr(solve_module, "MATRIX_BYTES", 8 * atoms * 200)
+    code, out, err = run_cli(capsys, "--vehicles", "3", "--max-sites", "201")
+    assert code == 2 and out == ""
+    assert f"201 candidate sites x {atoms} demand atoms" in err
+    assert "offer at most 200 sites" in err and len(err.strip().splitlines()) == 1
+    space = RoadSpace(drt_network)
+    with pytest.raises(InvalidInput, match="offer at most 200 sites"):
+        solve_demand(space, uniform_by_length(drt_network), 3, max_sites=201)
