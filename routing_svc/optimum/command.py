@@ -11,8 +11,8 @@ prints one JSON object: the expected cost of the best configuration found
 offset, x, y), how it was found (``method``, ``proven_optimal``,
 ``lower_bound``, ``seconds``) and the problem size (``n_sites`` offered after
 subsampling and merging identical rows, ``candidate_sites`` before, ``n_demand``).
-Without ``--max-sites`` every candidate site is offered, or where their cost matrix
-would exceed :data:`~routing_svc.optimum.solve.MATRIX_BYTES` as many as it holds.
+Without ``--max-sites`` every candidate site is offered; never more than a cost matrix
+of :data:`~routing_svc.optimum.solve.MATRIX_BYTES` holds (evenly subsampled beyond).
 With ``--stands`` the vehicles park at the usable stands of a SUMO
 additional file (read as ``routing-svc stands`` reads it), within their
 capacities (:func:`~routing_svc.optimum.stands.solve_stands`; one position per
@@ -41,7 +41,7 @@ from routing_svc.network.stands import usable_stands
 from routing_svc.optimum.candidates import candidate_sites
 from routing_svc.optimum.evaluate import expected_cost
 from routing_svc.optimum.pmedian import Method
-from routing_svc.optimum.solve import DemandOptimum, sites_that_fit, solve_demand
+from routing_svc.optimum.solve import DemandOptimum, solve_demand
 from routing_svc.optimum.stands import solve_stands
 from routing_svc.types import NetPosition
 
@@ -76,7 +76,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         type=int,
         default=None,
         metavar="N",
-        help="subsample the candidate sites (default: every one, or as many as a cost "
+        help="subsample the candidate sites (default: every one; never more than a cost "
         "matrix of 4 GiB holds)",
     )
     parser.add_argument(
@@ -139,8 +139,8 @@ def optimum_report(
     method : {"auto", "milp", "heuristic"}
         See :func:`~routing_svc.optimum.pmedian.solve_pmedian`.
     max_sites : int, optional
-        Subsample the candidate sites to at most this many; by default every one, or
-        as many as :func:`~routing_svc.optimum.solve.sites_that_fit` the demand.
+        Subsample the candidate sites to at most this many (default: every one); never
+        more than :func:`~routing_svc.optimum.solve.sites_that_fit` the demand.
     time_limit : float
         Seconds for the exact method.
     stands : Path, optional
@@ -175,8 +175,6 @@ def optimum_report(
     reading = None if stands is None else usable_stands(stands, network, vehicles)
     space = RoadSpace(network, cost=_COSTS[cost])
     offered = len(candidate_sites(network, distribution))
-    if max_sites is None and offered > sites_that_fit(len(distribution)):
-        max_sites = sites_that_fit(len(distribution))
     free = solve_demand(
         space,
         distribution,

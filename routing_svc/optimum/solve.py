@@ -107,7 +107,8 @@ def solve_demand(
         The candidate sites; default: ``candidate_sites(space.network, demand,
         max_sites=max_sites)``.
     max_sites : int or None
-        Limit of the default candidate sites (``None``: every one).
+        Limit of the default candidate sites (``None``: every one); never more than
+        :func:`sites_that_fit` the demand.
     power : float
         Exponent ``q`` of the service cost ``d ** q``.
     distinct : bool
@@ -122,22 +123,24 @@ def solve_demand(
     Raises
     ------
     InvalidInput
-        More vehicles than (distinct) candidate sites, a cost matrix larger than
-        :data:`MATRIX_BYTES`, or anything
+        More vehicles than (distinct) candidate sites, given ``sites`` whose cost matrix
+        exceeds :data:`MATRIX_BYTES`, or anything
         :func:`candidate_sites` or :func:`solve_pmedian` rejects.
     TypeError
         ``sites`` omitted for a space that is not a road network.
     """
-    offered: list[P] = (
-        list(sites) if sites is not None else _network_sites(space, demand, max_sites)
-    )
     atoms = len(demand.positions)
-    if len(offered) > sites_that_fit(atoms):
+    fit = sites_that_fit(atoms)
+    offered: list[P] = (
+        list(sites)
+        if sites is not None
+        else _network_sites(space, demand, fit if max_sites is None else min(max_sites, fit))
+    )
+    if len(offered) > fit:
         raise InvalidInput(
-            f"the cost matrix of {len(offered)} candidate sites x {atoms} demand atoms would "
-            f"take {8 * len(offered) * atoms / 2**30:.1f} GiB, over the "
-            f"{MATRIX_BYTES / 2**30:g} GiB solved: offer at most {sites_that_fit(atoms)} sites "
-            "(max_sites, --max-sites)"
+            f"the cost matrix of {len(offered)} sites x {atoms} demand atoms would take "
+            f"{8 * len(offered) * atoms / 2**30:.1f} GiB, over the {MATRIX_BYTES / 2**30:g} GiB "
+            f"solved: offer at most {fit} sites"
         )
     if not distinct:
         _check_fleet(p, len(offered), "candidate sites")

@@ -12,7 +12,7 @@ from routing_svc.cli import main
 from routing_svc.demand import from_weights_file, uniform_by_length
 from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork, RoadSpace
-from routing_svc.optimum import expected_cost, solve_demand
+from routing_svc.optimum import candidate_sites, expected_cost, solve_demand
 from routing_svc.optimum import solve as solve_module
 from routing_svc.types import NetPosition
 from tests.optimum.conftest import DRT_NET
@@ -144,17 +144,21 @@ def test_without_max_sites_a_large_problem_is_offered_the_sites_its_matrix_budge
 
 
 @pytest.mark.usefixtures("cache")
-def test_sites_whose_matrix_exceeds_the_budget_are_one_line_and_exit_code_2(
+def test_max_sites_never_exceeds_the_budget_and_given_sites_over_it_are_refused(
     capsys: pytest.CaptureFixture[str],
     drt_network: CompiledNetwork,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    atoms = len(uniform_by_length(drt_network))
+    demand = uniform_by_length(drt_network)
+    atoms = len(demand)
     monkeypatch.setattr(solve_module, "MATRIX_BYTES", 8 * atoms * 200)
-    code, out, err = run_cli(capsys, "--vehicles", "3", "--max-sites", "201")
-    assert code == 2 and out == ""
-    assert f"201 candidate sites x {atoms} demand atoms" in err
-    assert "offer at most 200 sites" in err and len(err.strip().splitlines()) == 1
+    code, out, err = run_cli(capsys, "--vehicles", "3", "--max-sites", "1000")
+    assert code == 0, err
+    assert json.loads(out)["n_sites"] <= 200
     space = RoadSpace(drt_network)
-    with pytest.raises(InvalidInput, match="offer at most 200 sites"):
-        solve_demand(space, uniform_by_length(drt_network), 3, max_sites=201)
+    sites = candidate_sites(drt_network, demand, max_sites=201)
+    assert len(sites) == 201
+    with pytest.raises(InvalidInput, match=f"201 sites x {atoms} demand atoms") as refused:
+        solve_demand(space, demand, 3, sites=sites)
+    assert "offer at most 200 sites" in str(refused.value)
+    assert len(solve_demand(space, demand, 3, sites=sites[:200]).sites) == 200
