@@ -29,6 +29,8 @@ cost matrix is computed, without changing the optimum.
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
 from routing_svc.demand import DemandDistribution
@@ -83,9 +85,18 @@ def distinct_rows(costs: FloatArray) -> IntArray:
     """Indices of the first occurrence of every distinct row, ascending.
 
     Sites with identical cost rows are interchangeable in a p-median, so only
-    one of each needs to be offered to the solver.
+    one of each needs to be offered to the solver. Rows are grouped by a digest of
+    their values and compared within a group, without a sorted copy of the matrix.
     """
     if costs.ndim != 2:
         raise InvalidInput(f"expected a 2-D cost matrix, got shape {costs.shape}")
-    _, first = np.unique(costs, axis=0, return_index=True)
-    return np.sort(first).astype(np.int64)
+    rows = np.ascontiguousarray(costs, dtype=np.float64)
+    first: dict[bytes, list[int]] = {}  # a digest of a row's bits -> rows kept with it
+    kept = []
+    for i, row in enumerate(rows):
+        bits = (row + 0.0).data  # -0.0 + 0.0 is 0.0: equal rows, equal bits
+        alike = first.setdefault(hashlib.blake2b(bits, digest_size=16).digest(), [])
+        if not any(np.array_equal(rows[j], row) for j in alike):
+            alike.append(i)
+            kept.append(i)
+    return np.array(kept, dtype=np.int64)

@@ -43,7 +43,7 @@ MAX_SITES = 1500
 """Candidate sites kept on a road network (subsampled deterministically beyond);
 ``solve_pmedian`` is exact up to ``MILP_MAX_SITES`` and heuristic above."""
 
-MATRIX_BYTES = 4 * 2**30
+MATRIX_BYTES = 2 * 2**30
 """The largest site-by-atom cost matrix solved (the heuristics hold its transpose too)."""
 
 
@@ -150,8 +150,9 @@ def solve_demand(
     if distinct:
         rows = distinct_rows(matrix)
         _check_fleet(p, int(rows.size), "distinct candidate sites")
-        offered = [offered[int(i)] for i in rows]
-        matrix = matrix[rows]
+        if rows.size < len(offered):
+            offered = [offered[int(i)] for i in rows]
+            matrix = matrix[rows]
     solution = solve_pmedian(
         matrix, np.asarray(demand.weights), p, method=method, time_limit=time_limit
     )

@@ -123,3 +123,12 @@ def test_exact_pmedian_on_the_drt_network_equals_brute_force(
 def test_distinct_rows_keeps_the_first_of_equal_rows() -> None:
     costs = np.array([[1.0, 2.0], [0.0, 5.0], [1.0, 2.0], [0.0, 5.0], [3.0, 3.0]])
     assert distinct_rows(costs).tolist() == [0, 1, 4]
+
+
+def test_distinct_rows_are_numpys_unique_rows() -> None:
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        costs = rng.integers(0, 3, size=(int(rng.integers(1, 40)), int(rng.integers(1, 6))))
+        signed = costs.astype(float) * rng.choice([-1.0, 1.0], size=costs.shape)  # -0.0 too
+        _, first = np.unique(signed, axis=0, return_index=True)
+        assert distinct_rows(signed).tolist() == sorted(first.tolist())
