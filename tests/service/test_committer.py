@@ -65,11 +65,13 @@ def test_the_hand_over_returns_once_the_thread_has_taken_the_commit(
 def test_a_busy_thread_costs_the_loop_only_the_bounded_wait(committer: Committer) -> None:
     release = threading.Event()
     order: list[str] = []
-    before = handoff_timeouts()
+    before: list[float] = []
 
     async def hand_over() -> float:
         loop = asyncio.get_running_loop()
         busy = committer.hand_over(loop, blocked_until(release))
+        # on a loaded machine the thread may take the first commit after its bound too
+        before.append(handoff_timeouts())
         start = loop.time()
         second = committer.hand_over(loop, lambda: order.append("second"))
         waited = loop.time() - start
@@ -80,7 +82,7 @@ def test_a_busy_thread_costs_the_loop_only_the_bounded_wait(committer: Committer
 
     waited = run(hand_over())
     assert order == ["second"]
-    assert handoff_timeouts() == before + 1
+    assert handoff_timeouts() == before[0] + 1  # the second hand-over's bounded wait
     assert waited >= COMMIT_HANDOFF_WAIT * 0.9  # it did wait for the bound, then went on
 
 
