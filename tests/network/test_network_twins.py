@@ -8,6 +8,7 @@ smaller networkx cost of the position and its twin.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 import sumolib
 
@@ -49,12 +50,19 @@ def reference_cost(
     return best
 
 
+def reference_costs(
+    case: NetCase, twins: dict[str, str], sources: list[NetPosition], target: NetPosition
+) -> npt.NDArray[np.float64]:
+    """The networkx cost from each source to ``target``, leaving either way on length costs."""
+    ref = case.reference
+    costs = ref.edge_costs(kind="length")
+    start = ref.start_costs(case.ids(target), costs, ref.weighted(costs))
+    return np.array([reference_cost(case, twins, s, target, start, costs) for s in sources])
+
+
 def test_either_way_costs_match_networkx(case: NetCase) -> None:
     space = RoadSpace(case.network)
     twins = sumolib_twins(case)
-    ref = case.reference
-    costs = ref.edge_costs(kind="length")
-    weighted = ref.weighted(costs)
     rng = np.random.default_rng(17)
     req, _ = build_requirement(["a"] * 6, None)
     for _ in range(300):
@@ -65,10 +73,7 @@ def test_either_way_costs_match_networkx(case: NetCase) -> None:
         if twin_id is not None:
             r = case.network.edge_index[twin_id]
             vehicles[0] = NetPosition(r, float(rng.uniform(0, case.network.length[r])))
-        start = ref.start_costs(case.ids(target), costs, weighted)
-        expected = np.array(
-            [reference_cost(case, twins, v, target, start, costs) for v in vehicles]
-        )
+        expected = reference_costs(case, twins, vehicles, target)
         found = space.assign(target, vehicles, np.ones(6), req)
         best = int(min(range(6), key=lambda i: (expected[i], i)))
         assert found.served_by == (best,)
@@ -84,18 +89,11 @@ def test_either_way_matrix_in_blocks_matches_networkx(
     monkeypatch.setattr(space_module, "_TWIN_BLOCK_CELLS", 2 * targets_count)
     space = RoadSpace(case.network)
     twins = sumolib_twins(case)
-    ref = case.reference
-    costs = ref.edge_costs(kind="length")
-    weighted = ref.weighted(costs)
     rng = np.random.default_rng(29)
     sources = case.random_positions(rng, 25)
     targets = case.random_positions(rng, targets_count)
     assert sum(case.network.edge_ids[s.edge] in twins for s in sources) > 2  # several blocks
-    expected = np.empty((len(sources), len(targets)))
-    for j, target in enumerate(targets):
-        start = ref.start_costs(case.ids(target), costs, weighted)
-        for i, source in enumerate(sources):
-            expected[i, j] = reference_cost(case, twins, source, target, start, costs)
+    expected = np.column_stack([reference_costs(case, twins, sources, t) for t in targets])
     np.testing.assert_allclose(space.cost_matrix(sources, targets), expected, rtol=1e-9)
 
 
