@@ -13,6 +13,9 @@ Anything the template does not cover (a value that is not a plain finite
 float, int or string, a position described with other keys) goes to the
 canonical encoder, which also raises for NaN and infinity.
 ``tests/service/test_canonical.py`` checks the template against the encoder.
+
+A fleet's state snapshot is not an event: it is written by orjson
+(:func:`state_dumps`) and compared by value (:func:`same_state`).
 """
 
 from __future__ import annotations
@@ -23,7 +26,9 @@ from collections.abc import Sequence
 from json.encoder import encode_basestring_ascii
 from typing import Any, NamedTuple
 
-__all__ = ["TargetResult", "dumps", "result_cost", "target_payload"]
+import orjson
+
+__all__ = ["TargetResult", "dumps", "result_cost", "same_state", "state_dumps", "target_payload"]
 
 _CANONICAL = json.JSONEncoder(separators=(",", ":"), sort_keys=True, allow_nan=False)
 
@@ -35,6 +40,32 @@ def dumps(data: Any) -> str:
     allow_nan=False)`` gives, with one encoder kept instead of one per call.
     """
     return _CANONICAL.encode(data)
+
+
+def state_dumps(data: Any) -> str:
+    """JSON text of a fleet's state snapshot: sorted keys, exact float round trip.
+
+    Snapshots are the largest texts the write path writes (a ``consolidating``
+    fleet's reservoir), and are compared by :func:`same_state`, not byte for byte,
+    so they are written by orjson. Its floats are the shortest round-trip digits as
+    :func:`dumps` writes them, with other exponent forms (``1e-7`` for ``1e-07``),
+    and its strings are UTF-8. A fleet's state holds finite floats only (every
+    input is checked); orjson would write a non-finite one as ``null``, which
+    :func:`same_state` then finds different from the replayed state.
+    """
+    return orjson.dumps(data, option=orjson.OPT_SORT_KEYS).decode()
+
+
+def same_state(first: str, second: str) -> bool:
+    """Whether two JSON texts hold the same values, floats bit for bit (``-0.0`` is not
+    ``0.0``), whichever encoder wrote them (:func:`dumps` or :func:`state_dumps`)."""
+    if first == second:
+        return True
+    return _normal(first) == _normal(second)
+
+
+def _normal(text: str) -> bytes:
+    return orjson.dumps(orjson.loads(text), option=orjson.OPT_SORT_KEYS)
 
 
 _text = encode_basestring_ascii
@@ -51,6 +82,31 @@ def _number(value: object) -> str:
     if type(value) is int:
         return int.__repr__(value)
     raise _Untemplated
+
+
+_FIXED_LOW, _FIXED_HIGH = 1e-4, 1e16
+"""Magnitudes ``repr`` writes without an exponent, where orjson writes the same digits."""
+
+
+def _numbers(values: list[object]) -> list[str]:
+    """``[_number(v) for v in values]``, the floats written by one orjson call.
+
+    orjson writes the shortest round-trip digits, as ``repr`` does; the two differ
+    only in the exponent form, which ``repr`` uses for magnitudes below
+    :data:`_FIXED_LOW` or from :data:`_FIXED_HIGH` on. Those, and anything that is not
+    a float, are written by :func:`_number` (which raises for what the template does
+    not write).
+    """
+    try:
+        texts = orjson.dumps(values).decode()[1:-1].split(",")
+    except orjson.JSONEncodeError:
+        texts = []
+    if len(texts) != len(values):
+        return [_number(v) for v in values]
+    for i, v in enumerate(values):
+        if type(v) is not float or not (_FIXED_LOW <= abs(v) < _FIXED_HIGH or v == 0.0):
+            texts[i] = _number(v)
+    return texts
 
 
 def _same_as(value: object, written: float, text: str) -> str:
@@ -96,19 +152,31 @@ def target_payload(target: dict[str, Any], requires: list[str] | None) -> str:
     return dumps({"target": target, "requires": requires})
 
 
-def _position(described: dict[str, Any]) -> str:
-    """``{"edge", "offset", "x", "y"}`` with ``"lon", "lat"`` or without, keys sorted."""
+_GEO_KEYS = ("lat", "lon", "offset", "x", "y")
+_PLANE_KEYS = ("offset", "x", "y")
+
+
+def _position_floats(described: dict[str, Any]) -> list[Any]:
+    """The numbers of a described position, in the order :func:`_position` writes them."""
     if len(described) == 6:
-        return (
-            f'{{"edge":{_string(described["edge"])},"lat":{_number(described["lat"])},'
-            f'"lon":{_number(described["lon"])},"offset":{_number(described["offset"])},'
-            f'"x":{_number(described["x"])},"y":{_number(described["y"])}}}'
-        )
+        return [described[k] for k in _GEO_KEYS]
     if len(described) == 4:
-        return (
-            f'{{"edge":{_string(described["edge"])},"offset":{_number(described["offset"])},'
-            f'"x":{_number(described["x"])},"y":{_number(described["y"])}}}'
-        )
+        return [described[k] for k in _PLANE_KEYS]
+    raise _Untemplated
+
+
+def _position(described: dict[str, Any], numbers: Sequence[str] | None = None) -> str:
+    """``{"edge", "offset", "x", "y"}`` with ``"lon", "lat"`` or without, keys sorted;
+    ``numbers``: its :func:`_position_floats` written already."""
+    if numbers is None:
+        numbers = _numbers(_position_floats(described))
+    edge = _string(described["edge"])
+    if len(numbers) == 5 and len(described) == 6:
+        lat, lon, offset, x, y = numbers
+        return f'{{"edge":{edge},"lat":{lat},"lon":{lon},"offset":{offset},"x":{x},"y":{y}}}'
+    if len(numbers) == 3 and len(described) == 4:
+        offset, x, y = numbers
+        return f'{{"edge":{edge},"offset":{offset},"x":{x},"y":{y}}}'
     raise _Untemplated
 
 
@@ -200,11 +268,19 @@ class TargetResult(NamedTuple):
         if self.consolidated is not None:
             raise _Untemplated
         cost = self.cost
-        cost_text = _number(cost)
+        target, new_position = self.target, self.new_position
+        at_target = new_position is target
+        target_floats = _position_floats(target)
+        moved_floats = [] if at_target else _position_floats(new_position)
+        cost_text, moved_by_text, noise_text, step_size_text, *positions = _numbers(
+            [cost, self.moved_by, self.noise, self.step_size, *target_floats, *moved_floats]
+        )
         dispatch_text = "" if self.dispatch is None else _dispatch(self.dispatch, cost, cost_text)
         seq_text = _number(self.seq)
-        target_text = _position(self.target)
-        new_position = self.new_position
+        target_text = _position(target, positions[: len(target_floats)])
+        new_position_text = (
+            target_text if at_target else _position(new_position, positions[len(target_floats) :])
+        )
         requires = self.requires
         return "".join(
             (
@@ -221,11 +297,11 @@ class TargetResult(NamedTuple):
                 ',"moved":',
                 _string(self.moved),
                 ',"moved_by":',
-                _number(self.moved_by),
+                moved_by_text,
                 ',"new_position":',
-                target_text if new_position is self.target else _position(new_position),
+                new_position_text,
                 ',"noise":',
-                _number(self.noise),
+                noise_text,
                 ',"objective":',
                 _same_as(self.objective, cost, cost_text),
                 ',"requires":',
@@ -235,7 +311,7 @@ class TargetResult(NamedTuple):
                 ',"served_by":[',
                 ",".join(map(_string, self.served_by)),
                 '],"step_size":',
-                _number(self.step_size),
+                step_size_text,
                 ',"target":',
                 target_text,
                 ',"times":[',

@@ -39,7 +39,13 @@ from routing_svc.service.background_solver import (
     ConsolidationSolver,
     PendingConsolidation,
 )
-from routing_svc.service.canonical import TargetResult, dumps, target_payload
+from routing_svc.service.canonical import (
+    TargetResult,
+    dumps,
+    same_state,
+    state_dumps,
+    target_payload,
+)
 from routing_svc.service.networks import NetworkEntry
 from routing_svc.service.reference import build_demand, expected_cost_now
 from routing_svc.service.service_levels import DEFAULT_THRESHOLDS, ServiceLevels
@@ -297,8 +303,9 @@ class FleetRuntime:
     # -- views ------------------------------------------------------------------
 
     def snapshot_json(self) -> str:
-        """The whole state as canonical JSON (what replay must reproduce bit for bit)."""
-        return dumps(
+        """The whole state as JSON (:func:`~routing_svc.service.canonical.state_dumps`;
+        what replay must reproduce bit for bit, :func:`same_snapshot`)."""
+        return state_dumps(
             {
                 "version": self.version,
                 "fleet": self.fleet.snapshot(),
@@ -455,13 +462,14 @@ def check_requires(requires: Sequence[str] | None) -> list[str] | None:
 def same_snapshot(replayed: str, stored: str) -> bool:
     """Whether a replayed :meth:`FleetRuntime.snapshot_json` matches a stored one.
 
-    A snapshot stored before service levels existed lacks their key: the rest
-    must still match byte for byte.
+    The same values, floats bit for bit, whichever encoder wrote the stored one
+    (:func:`~routing_svc.service.canonical.same_state`). A snapshot stored before
+    service levels existed lacks their key: the rest must still match.
     """
-    if replayed == stored:
+    if same_state(replayed, stored):
         return True
     data, kept = json.loads(replayed), json.loads(stored)
     if "service_levels" in kept:
         return False
     data.pop("service_levels", None)
-    return dumps(data) == stored
+    return same_state(state_dumps(data), stored)

@@ -10,12 +10,24 @@ from typing import Any
 import numpy as np
 import pytest
 
-from routing_svc.service.canonical import TargetResult, dumps, result_cost, target_payload
+from routing_svc.service.canonical import (
+    TargetResult,
+    dumps,
+    result_cost,
+    same_state,
+    state_dumps,
+    target_payload,
+)
 
 _STRINGS = [
     "v01", "-157539101#0", 'quote"back\\slash', "Zürich/Straße", "tab\tnew\nline", "🚕",
     '],"cost":9,"x',
 ]  # fmt: skip
+
+
+# floats at the edges of the spellings: zeros, exponents, both sides of 1e-4 and 1e16
+_EDGES = [0.0, -0.0, 1.0, 1e-5, 1.5e-300, 123456789.0, 1e-4, -1e-4, 9.999999999999999e-05]
+_EDGES += [1e16, 9999999999999998.0]
 
 
 def _float(rng: np.random.Generator) -> float:
@@ -27,7 +39,7 @@ def _float(rng: np.random.Generator) -> float:
             if math.isfinite(value):
                 return value * (1 if rng.random() < 0.5 else -1)
     if kind == 1:
-        return float(rng.choice([0.0, -0.0, 1.0, 1e-5, 1e16, 1.5e-300, 123456789.0]))
+        return float(rng.choice(_EDGES))
     if kind == 2:
         return float(np.round(rng.uniform(0, 1e4), int(rng.integers(0, 6))))
     return float(rng.uniform(0.0, 10.0 ** rng.integers(-6, 18)))
@@ -212,3 +224,52 @@ def test_a_payload_the_template_does_not_cover_goes_to_the_encoder(target: dict[
 def test_a_payload_with_nan_or_infinity_raises_like_the_encoder(offset: float) -> None:
     with pytest.raises(ValueError, match="JSON compliant"):
         target_payload({"edge": "e", "offset": offset}, None)
+
+
+def _state(rng: np.random.Generator) -> dict[str, Any]:
+    """A nested state of the shapes a fleet's snapshot has, floats of every kind."""
+    return {
+        "positions": [_position(rng) for _ in range(int(rng.integers(0, 6)))],
+        "learning": {"baseline": None if rng.random() < 0.3 else _float(rng), "epoch": 7},
+        "recent": [_float(rng) for _ in range(int(rng.integers(0, 6)))],
+        "deleted": bool(rng.random() < 0.5),
+    }
+
+
+def _floats_exactly(value: Any) -> Any:
+    """``value`` with each float as its bits (``==`` then tells ``-0.0`` from ``0.0``)."""
+    if isinstance(value, float):
+        return ("float", float.hex(value))
+    if isinstance(value, dict):
+        return {k: _floats_exactly(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_floats_exactly(v) for v in value]
+    return value
+
+
+def test_a_state_text_holds_the_state_bit_for_bit() -> None:
+    rng = np.random.default_rng(21)
+    for _ in range(5_000):
+        state = _state(rng)
+        text = state_dumps(state)
+        assert _floats_exactly(json.loads(text)) == _floats_exactly(state)
+        assert list(json.loads(text)) == sorted(state)
+        assert same_state(text, dumps(state))  # a snapshot stored by the canonical encoder
+
+
+def test_states_that_differ_in_one_float_are_not_the_same() -> None:
+    rng = np.random.default_rng(22)
+    for _ in range(2_000):
+        state = _state(rng)
+        state["recent"] = [*state["recent"], _float(rng)]
+        other = json.loads(json.dumps(state))
+        last = other["recent"][-1]
+        other["recent"][-1] = -last if last == 0.0 else math.nextafter(last, math.inf)
+        assert not same_state(state_dumps(state), state_dumps(other))
+        assert not same_state(dumps(state), state_dumps(other))
+
+
+def test_key_order_and_float_spelling_do_not_make_states_differ() -> None:
+    assert same_state('{"b":[1e-07,2.5],"a":null}', '{"a":null,"b":[1e-7,2.5]}')
+    assert not same_state('{"a":0.0}', '{"a":-0.0}')
+    assert not same_state('{"a":1}', '{"a":1.0}')
