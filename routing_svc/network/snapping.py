@@ -18,9 +18,9 @@ from numba import njit
 
 from routing_svc.errors import InvalidInput, OffNetwork
 from routing_svc.network.compile import CompiledNetwork
-from routing_svc.types import FloatArray, NetPosition
+from routing_svc.types import FloatArray, Int32Array, NetPosition
 
-__all__ = ["Snapper", "point_on_edge"]
+__all__ = ["Snapper", "point_on_edge", "points_on_edges"]
 
 
 def point_on_edge(network: CompiledNetwork, edge: int, offset: float) -> tuple[float, float]:
@@ -42,6 +42,48 @@ def point_on_edge(network: CompiledNetwork, edge: int, offset: float) -> tuple[f
         float(network.length[edge]),
         float(offset),
     )
+
+
+def points_on_edges(
+    network: CompiledNetwork, edges: npt.NDArray[np.int64], offsets: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`point_on_edge` of every ``(edges[i], offsets[i])``, the same arithmetic.
+
+    Parameters
+    ----------
+    network : CompiledNetwork
+        The network.
+    edges : ndarray of int64
+        Edge indices.
+    offsets : FloatArray
+        Offsets in metres, ``0 <= offsets[i] <= length[edges[i]]``.
+    """
+    return _points_on_shapes(
+        network.shape_xy,
+        network.shape_offsets,
+        network.length,
+        np.ascontiguousarray(edges, dtype=np.int64),
+        np.ascontiguousarray(offsets, dtype=np.float64),
+    )
+
+
+@njit(cache=True)
+def _points_on_shapes(
+    points: FloatArray,
+    shape_offsets: Int32Array,
+    length: FloatArray,
+    edges: npt.NDArray[np.int64],
+    offsets: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`_point_on_shape` of every edge and offset."""
+    xs = np.empty(edges.size)
+    ys = np.empty(edges.size)
+    for i in range(edges.size):
+        e = edges[i]
+        xs[i], ys[i] = _point_on_shape(
+            points, shape_offsets[e], shape_offsets[e + 1], length[e], offsets[i]
+        )
+    return xs, ys
 
 
 @njit(cache=True)

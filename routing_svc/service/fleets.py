@@ -314,8 +314,9 @@ class FleetService:
 
         def compute(runtime: FleetRuntime) -> list[NewEvent]:
             out = []
-            for position, requires in resolved:
-                payload, result = runtime.apply_target(position, requires)
+            described = runtime.entry.describe_many([position for position, _ in resolved])
+            for (position, requires), place in zip(resolved, described, strict=True):
+                payload, result = runtime.apply_target(position, requires, described=place)
                 out.append(NewEvent("target", payload, result))
             return out
 

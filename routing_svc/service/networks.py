@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -11,9 +12,11 @@ import numpy as np
 
 from routing_svc.errors import InvalidInput, InvalidNetwork, UnknownEdge, UnknownNetwork
 from routing_svc.network import CompiledNetwork, RoadSpace, Snapper, load_network
+from routing_svc.network.costs import position_arrays
 from routing_svc.network.identity import network_sha256
 from routing_svc.network.osm_import import looks_like_osm, osm_to_net_bytes
 from routing_svc.network.safe_xml import check_net_xml_file, read_net_bytes
+from routing_svc.network.snapping import points_on_edges
 from routing_svc.sa.space import Requirement
 from routing_svc.service.schemas import EdgePosition, LonLatPosition, Position, XYPosition
 from routing_svc.types import NetPosition
@@ -105,6 +108,33 @@ class NetworkEntry:
                 self._described.clear()
             kept = self._described[position] = self._description(position)
         return dict(kept)
+
+    def describe_many(self, positions: Sequence[NetPosition]) -> list[dict[str, Any]]:
+        """:meth:`describe` of each position, computed together (the same arithmetic,
+        :func:`~routing_svc.network.snapping.points_on_edges`); nothing is kept.
+
+        Raises
+        ------
+        InvalidInput
+            If a position is not on the network.
+        """
+        network = self.network
+        edges, offsets = position_arrays(network, positions, what="position")
+        xs, ys = points_on_edges(network, edges, offsets)
+        ids = network.edge_ids
+        projection = network.projection
+        if projection is None or not projection.supported:
+            return [
+                {"edge": ids[p.edge], "offset": p.offset, "x": x, "y": y}
+                for p, x, y in zip(positions, xs.tolist(), ys.tolist(), strict=True)
+            ]
+        lons, lats = projection.to_lonlat(xs, ys)
+        return [
+            {"edge": ids[p.edge], "offset": p.offset, "x": x, "y": y, "lon": lon, "lat": lat}
+            for p, x, y, lon, lat in zip(
+                positions, xs.tolist(), ys.tolist(), lons.tolist(), lats.tolist(), strict=True
+            )
+        ]
 
     def _description(self, position: NetPosition) -> dict[str, Any]:
         space = self.space("length")

@@ -108,13 +108,15 @@ class FleetRuntime:
         recorded: Consolidation[NetPosition] | None = None,
         replaying: bool = False,
         legacy: bool = False,
+        described: dict[str, Any] | None = None,
     ) -> tuple[str, str]:
         """Serve one target; return the event's payload and result JSON.
 
         ``replaying``: the event is read back from the log, and ``recorded`` is the
         consolidation its stored result holds (applied, not solved again).
         ``legacy``: the stored result predates the dispatch answer; it is written
-        again without it.
+        again without it. ``described``: the target's description, computed already
+        (:meth:`NetworkEntry.describe_many`).
         """
         self._check_live()
         if replaying:
@@ -127,7 +129,8 @@ class FleetRuntime:
             self._hand_over_due()
         seq = self.version + 1
         d = outcome.dispatch
-        described = self.entry.describe(target)
+        if described is None:
+            described = self.entry.describe(target)
         required = list(requires) if requires else None
         result = TargetResult(
             seq=seq,
