@@ -39,7 +39,7 @@ from routing_svc.errors import InvalidInput, NotFound, OffNetwork, RoutingSvcErr
 from routing_svc.history.calls import BadRow, CallTable
 from routing_svc.sa.requirements import build_requirement
 from routing_svc.service.networks import SNAP_DISTANCE_M, NetworkEntry
-from routing_svc.service.schemas import MAX_RESOLVED_POSITIONS, EdgePosition
+from routing_svc.service.schemas import MAX_EDGE_ID, MAX_RESOLVED_POSITIONS, EdgePosition
 from routing_svc.types import NetPosition
 
 SNAP_BLOCK = 65_536
@@ -99,6 +99,35 @@ def _requirement_errors(
     return errors
 
 
+def _resolve_edges(
+    table: CallTable, entry: NetworkEntry
+) -> tuple[list[NetPosition | None], dict[int, str]]:
+    """Each edge row's position as the route resolves it, or why not.
+
+    A row on a known edge with an offset from 0 to its length passes every check of
+    the route's :class:`EdgePosition` and :meth:`NetworkEntry.resolve_edge`, and is
+    placed at once; any other goes through them, for their message.
+    """
+    index = entry.network.edge_index
+    lengths = entry.network.length_values
+    positions: list[NetPosition | None] = []
+    reasons: dict[int, str] = {}
+    for row, (edge, offset) in enumerate(zip(table.edges, table.second.tolist(), strict=True)):
+        i = index.get(edge)
+        if i is not None and 0.0 <= offset <= lengths[i] and len(edge) <= MAX_EDGE_ID:
+            positions.append(NetPosition(i, offset))
+            continue
+        try:
+            positions.append(entry.resolve(EdgePosition(edge=edge, offset=offset)))
+        except ValidationError as exc:
+            positions.append(None)
+            reasons[row] = str(exc.errors()[0].get("msg"))
+        except RoutingSvcError as exc:
+            positions.append(None)
+            reasons[row] = exc.detail
+    return positions, reasons
+
+
 def place_locally(
     table: CallTable, entry: NetworkEntry, *, vehicle_types: Sequence[str] | None
 ) -> PlacedCalls:
@@ -107,16 +136,7 @@ def place_locally(
     reasons: dict[int, str] = {}
     positions: list[NetPosition | None]
     if table.form == "edge":
-        positions = []
-        for row, (edge, offset) in enumerate(zip(table.edges, table.second.tolist(), strict=True)):
-            try:
-                positions.append(entry.resolve(EdgePosition(edge=edge, offset=offset)))
-            except ValidationError as exc:
-                positions.append(None)
-                reasons[row] = str(exc.errors()[0].get("msg"))
-            except RoutingSvcError as exc:
-                positions.append(None)
-                reasons[row] = exc.detail
+        positions, reasons = _resolve_edges(table, entry)
     else:
         if table.form == "lonlat":
             projection = entry.network.projection

@@ -28,8 +28,12 @@ class Strict(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
+MAX_EDGE_ID = 256
+"""The longest edge id a request may name."""
+
+
 class EdgePosition(Strict):
-    edge: Annotated[str, StringConstraints(min_length=1, max_length=256)]
+    edge: Annotated[str, StringConstraints(min_length=1, max_length=MAX_EDGE_ID)]
     offset: Annotated[float, Field(allow_inf_nan=False, ge=0.0)] = 0.0
 
 
@@ -274,7 +278,7 @@ def edge_target(edge: str, offset: float, requires: Sequence[str] | None) -> dic
 
 class TravelTimes(Strict):
     times: dict[
-        Annotated[str, StringConstraints(min_length=1, max_length=256)],
+        Annotated[str, StringConstraints(min_length=1, max_length=MAX_EDGE_ID)],
         Annotated[float, Field(allow_inf_nan=False, gt=0.0, le=1e7)],
     ]
 
