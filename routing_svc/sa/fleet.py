@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from itertools import compress, count
 from operator import is_not, ne
-from typing import Any, Generic, cast
+from typing import Any, Generic, NamedTuple, cast
 
 import numpy as np
 
@@ -269,8 +269,7 @@ class Learning(Generic[P]):
     squares' sum and their size (:meth:`ConsolidationPolicy.starts_epoch`)."""
 
 
-@dataclass(frozen=True, slots=True)
-class Dispatch(Generic[P]):
+class Dispatch(NamedTuple, Generic[P]):
     """Who serves a target (the answer of :meth:`Fleet.assign`)."""
 
     served_by: tuple[str, ...]

@@ -21,7 +21,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import Generic
+from typing import Generic, NamedTuple
 
 import numpy as np
 
@@ -83,8 +83,7 @@ class LearningVehicles(StrEnum):
     AVAILABLE = "available"
 
 
-@dataclass(frozen=True, slots=True)
-class Sent:
+class Sent(NamedTuple):
     """The dispatch answer: the vehicles to send now, per required type.
 
     Attributes

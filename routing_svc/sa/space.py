@@ -55,8 +55,7 @@ class Requirement:
     target dispatches from their current positions (:mod:`routing_svc.sa.live`)."""
 
 
-@dataclass(frozen=True, slots=True)
-class Assignment(Generic[P]):
+class Assignment(NamedTuple, Generic[P]):
     """What a space found for one target.
 
     Attributes

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from typing import Any
+from typing import Any, NamedTuple
 
 from routing_svc.errors import RoutingSvcError
 
@@ -35,8 +35,7 @@ def as_utc(moment: datetime) -> datetime:
     return moment.astimezone(UTC)
 
 
-@dataclass(frozen=True, slots=True)
-class NewEvent:
+class NewEvent(NamedTuple):
     """An event that an append is about to write.
 
     Parameters
@@ -55,8 +54,7 @@ class NewEvent:
     result_json: str | None = None
 
 
-@dataclass(frozen=True, slots=True)
-class EventRecord:
+class EventRecord(NamedTuple):
     """A stored event: number ``seq`` of fleet ``fleet_id`` (numbers start at 1)."""
 
     fleet_id: str
