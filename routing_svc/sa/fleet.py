@@ -285,11 +285,10 @@ class Dispatch(NamedTuple, Generic[P]):
     fills it."""
 
 
-@dataclass(frozen=True, slots=True)
-class Outcome(Generic[P]):
+class Outcome(NamedTuple, Generic[P]):
     """What one :meth:`Fleet.observe` did."""
 
-    index: int
+    target_number: int
     """The target's number ``k`` among the fleet's targets (0-based)."""
     dispatch: Dispatch[P]
     step_size: float

@@ -23,15 +23,13 @@ points where the p-median lies are fixed points.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Generic, Protocol, runtime_checkable
+from typing import Generic, NamedTuple, Protocol, runtime_checkable
 
 from routing_svc.errors import InvalidInput
 from routing_svc.sa.space import P
 
 
-@dataclass(frozen=True, slots=True)
-class Hold(Generic[P]):
+class Hold(NamedTuple, Generic[P]):
     """A reference held on a junction: the exit it leans to and the pressure toward it.
 
     ``exit`` is the first junction beyond the exit (:meth:`JunctionSpace.junction_ahead`).

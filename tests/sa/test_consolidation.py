@@ -926,7 +926,7 @@ def calm_run(space: RoadSpace) -> Run:
 def test_consolidations_happen_on_the_schedule(calm_run: Run) -> None:
     _, fleet, outcomes = calm_run
     assert fleet.config.rule is Rule.CONSOLIDATING
-    done = [o.index + 1 for o in outcomes if o.consolidation is not None]
+    done = [o.target_number + 1 for o in outcomes if o.consolidation is not None]
     # periods of a tenth of the epoch's targets, at least 250 (a tenth of 2,750: 275)
     assert done == [250 * i for i in range(1, 12)]
     assert done == schedule(CALM, start=CALM.first, epoch=0, until=3000)
@@ -935,7 +935,9 @@ def test_consolidations_happen_on_the_schedule(calm_run: Run) -> None:
     assert learning is not None and learning.epoch == 0
     assert learning.next_consolidation == 3025  # 2750 + 275
     assert len(learning.reservoir) == 3000
-    last = max(o.index + 1 for o in outcomes if o.consolidation and o.consolidation.accepted)
+    last = max(
+        o.target_number + 1 for o in outcomes if o.consolidation and o.consolidation.accepted
+    )
     assert learning.accepted_at == last
 
 
@@ -946,7 +948,7 @@ def test_a_fleet_whose_consolidations_are_turned_down_consolidates_more_rarely(
     _, stream = demand_stream(3, 6000)
     fleet = consolidating_fleet(space, policy=policy)
     outcomes = [fleet.observe(z) for z in stream]
-    taken = {o.index + 1: o.consolidation.accepted for o in outcomes if o.consolidation}
+    taken = {o.target_number + 1: o.consolidation.accepted for o in outcomes if o.consolidation}
     # by hand: the longer of a quarter of the epoch's targets (50 to 100) and a quarter of
     # the targets since the references were last replaced (up to 800)
     expected, due, accepted_at = [], 50, 0
@@ -1023,7 +1025,9 @@ def test_references_no_consolidation_fitted_ask_more_and_hold_still(
         for z in stream:
             outcomes.append(fleet.observe(z))
             positions.append(list(fleet.state.positions))
-        first = next(o.index for o in outcomes if o.consolidation and o.consolidation.accepted)
+        first = next(
+            o.target_number for o in outcomes if o.consolidation and o.consolidation.accepted
+        )
         runs[unfitted] = (start, outcomes, positions, first)
     start, outcomes, positions, first = runs[2.5]
     gated = [c for _, fitted, c in asked[: len(asked) // 2] if fitted == 0]
@@ -1057,7 +1061,9 @@ def test_each_consolidation_tests_the_targets_since_the_last_acceptance(
     starts = list(fleet.state.positions)
     for z, out in zip(stream, outcomes, strict=True):
         assert fleet.observe(z) == out
-    records = [(o.index + 1, o.consolidation) for o in outcomes if o.consolidation is not None]
+    records = [
+        (o.target_number + 1, o.consolidation) for o in outcomes if o.consolidation is not None
+    ]
     assert len(calls) == len(records)
     accepted_at, anchor = 0, starts
     for call, (count, done) in zip(calls, records, strict=True):
@@ -1075,7 +1081,11 @@ def test_each_consolidation_tests_the_targets_since_the_last_acceptance(
 
 def test_a_consolidation_is_applied_after_the_step(calm_run: Run, space: RoadSpace) -> None:
     stream, _, outcomes = calm_run
-    k = next(o.index for o in outcomes if o.consolidation is not None and o.consolidation.accepted)
+    k = next(
+        o.target_number
+        for o in outcomes
+        if o.consolidation is not None and o.consolidation.accepted
+    )
     fleet = consolidating_fleet(space, policy=CALM)
     for z in stream[:k]:
         fleet.observe(z)
@@ -1190,7 +1200,7 @@ def first_shift(outcomes: Sequence[Any], policy: ConsolidationPolicy) -> int | N
     together by more than ``shift_confidence`` standard errors of their mean, from the
     outcomes alone."""
     baselines = {
-        o.index + 1: (
+        o.target_number + 1: (
             o.consolidation.fresh_baseline if policy.fresh_baseline else o.consolidation.baseline
         )
         for o in outcomes
@@ -1266,7 +1276,7 @@ def test_identical_vehicles_consolidate_on_the_schedule_whatever_their_common_sp
             space, vehicles=[Vehicle(f"v{i}", speed=speed) for i in range(4)]
         )
         outcomes = [fleet.observe(z) for z in stream]
-        done = [o.index + 1 for o in outcomes if o.consolidation is not None]
+        done = [o.target_number + 1 for o in outcomes if o.consolidation is not None]
         assert done == expected, speed
         assert first_shift(outcomes, policy) is None
         learning = fleet.state.learning
@@ -1274,7 +1284,7 @@ def test_identical_vehicles_consolidate_on_the_schedule_whatever_their_common_sp
         # the last consolidation's sample cost is in waiting times D / speed
         last = next(o for o in reversed(outcomes) if o.consolidation is not None)
         assert last.consolidation is not None
-        reservoir = stream[: last.index + 1]
+        reservoir = stream[: last.target_number + 1]
         positions = last.consolidation.positions if last.consolidation.accepted else None
         if positions is not None:
             mean = sample_objective(space, positions, reservoir, 1.0, speed) / len(reservoir)
@@ -1296,14 +1306,14 @@ def test_a_shift_of_the_demand_starts_a_new_epoch(space: RoadSpace) -> None:
     policy = ConsolidationPolicy(shift_ratio=2.0)
     fleet = consolidating_fleet(space, policy=policy)
     west = [fleet.observe(z) for z in west_targets]
-    done = [o.index + 1 for o in west if o.consolidation is not None]
+    done = [o.target_number + 1 for o in west if o.consolidation is not None]
     assert done == schedule(policy, start=policy.first, epoch=0, until=2000)
     learning = fleet.state.learning
     assert learning is not None and learning.epoch == 0
     assert first_shift(west, policy) is None
     at_shift = list(fleet.state.positions)
     outcomes = [*west, *(fleet.observe(z) for z in east_targets)]
-    done = [o.index + 1 for o in outcomes[2000:] if o.consolidation is not None]
+    done = [o.target_number + 1 for o in outcomes[2000:] if o.consolidation is not None]
     # the block of targets 2001..2250 costs far more than the baseline of the last
     # consolidation: a new epoch at 2250, its first consolidation ``first`` targets later
     # (not at 2532), on a reservoir of that block and the targets after it
@@ -1366,7 +1376,7 @@ def test_far_targets_in_blocks_in_a_row_start_an_epoch_together(space: RoadSpace
             targets[start + i * 250 // 18] = far
     fleet = consolidating_fleet(space, policy=policy)
     outcomes = [fleet.observe(z) for z in targets]
-    done = [o.index + 1 for o in outcomes if o.consolidation is not None]
+    done = [o.target_number + 1 for o in outcomes if o.consolidation is not None]
     assert [d for d in done if 1688 <= d <= 2500] == [1688]
     last = next(o.consolidation for o in outcomes[1687:1688] if o.consolidation is not None)
     limit = policy.shift_ratio * last.fresh_baseline
@@ -1425,7 +1435,7 @@ def test_coverage_objective_consolidates_too(space: RoadSpace) -> None:
     _, stream = demand_stream(11, 250)
     fleet = consolidating_fleet(space, power=2.0, policy=CALM)
     outcomes = [fleet.observe(z) for z in stream]
-    assert [o.index + 1 for o in outcomes if o.consolidation is not None] == [250]
+    assert [o.target_number + 1 for o in outcomes if o.consolidation is not None] == [250]
     done = outcomes[-1].consolidation
     assert done is not None and done.sample == 250
     # the first consolidation: every target is fresh, the whole reservoir is priced
@@ -1654,7 +1664,7 @@ def test_a_deferred_fleet_applies_a_consolidation_solved_away_from_it_later(
     calm_run: Run, space: RoadSpace, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     stream, _, outcomes = calm_run
-    k = next(o.index for o in outcomes if o.consolidation is not None)  # due after k + 1
+    k = next(o.target_number for o in outcomes if o.consolidation is not None)  # due after k + 1
     lag = 37
     inline = consolidating_fleet(space, policy=CALM)
     for z in stream[: k + 1]:
