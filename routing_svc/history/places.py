@@ -24,6 +24,7 @@ edge's end) or when the fleet cannot serve its required types.
 
 from __future__ import annotations
 
+import math
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -104,21 +105,20 @@ def _resolve_edges(
 ) -> tuple[list[NetPosition | None], dict[int, str]]:
     """Each edge row's position as the route resolves it, or why not.
 
-    A row on a known edge with an offset from 0 to its length passes every check of
-    the route's :class:`EdgePosition` and :meth:`NetworkEntry.resolve_edge`, and is
-    placed at once; any other goes through them, for their message.
+    The table's edge rows already have a non-empty edge id and a finite offset from 0
+    (:func:`~routing_svc.history.calls.read_calls`); one whose id is not too long
+    passes the route's :class:`EdgePosition` as it stands and goes straight to
+    :meth:`NetworkEntry.resolve_edge`. Any other goes through the model, for its
+    message.
     """
-    index = entry.network.edge_index
-    lengths = entry.network.length_values
     positions: list[NetPosition | None] = []
     reasons: dict[int, str] = {}
     for row, (edge, offset) in enumerate(zip(table.edges, table.second.tolist(), strict=True)):
-        i = index.get(edge)
-        if i is not None and 0.0 <= offset <= lengths[i] and len(edge) <= MAX_EDGE_ID:
-            positions.append(NetPosition(i, offset))
-            continue
         try:
-            positions.append(entry.resolve(EdgePosition(edge=edge, offset=offset)))
+            if 0 < len(edge) <= MAX_EDGE_ID and 0.0 <= offset < math.inf:
+                positions.append(entry.resolve_edge(edge, offset))
+            else:
+                positions.append(entry.resolve(EdgePosition(edge=edge, offset=offset)))
         except ValidationError as exc:
             positions.append(None)
             reasons[row] = str(exc.errors()[0].get("msg"))

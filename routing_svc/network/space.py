@@ -499,6 +499,12 @@ class RoadSpace:
         check_position(self.network, position, what="position")
         return {"edge": self.network.edge_ids[position.edge], "offset": float(position.offset)}
 
+    def encode_many(self, positions: Sequence[NetPosition]) -> list[dict[str, object]]:
+        """:meth:`encode` of each position, checked together."""
+        position_arrays(self.network, positions, what="position")
+        ids = self.network.edge_ids
+        return [{"edge": ids[p.edge], "offset": float(p.offset)} for p in positions]
+
     def decode(self, data: dict[str, object]) -> NetPosition:
         """Inverse of :meth:`encode`.
 

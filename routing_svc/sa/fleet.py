@@ -975,7 +975,7 @@ class Fleet(Generic[P]):
     def snapshot(self) -> dict[str, Any]:
         """JSON-ready state (floats round-trip exactly through ``json``)."""
         return {
-            "positions": [self.space.encode(p) for p in self.state.positions],
+            "positions": self.space.encode_many(self.state.positions),
             "updates": list(self.state.updates),
             "targets": self.state.targets,
             "entries": [None if e is None else self.space.encode(e) for e in self.state.entries],
@@ -1006,8 +1006,8 @@ class Fleet(Generic[P]):
                 None if h is None else {"exit": encode(h.exit), "pressure": h.pressure}
                 for h in learning.holds
             ],
-            "anchor": [encode(p) for p in learning.anchor],
-            "reservoir": [encode(p) for p in learning.reservoir],
+            "anchor": self.space.encode_many(learning.anchor),
+            "reservoir": self.space.encode_many(learning.reservoir),
             "epoch": learning.epoch,
             "next_consolidation": learning.next_consolidation,
             "baseline": learning.baseline,

@@ -8,6 +8,7 @@ so eq. (10) moves ``p <- p - gamma (p - z)/|p - z|`` and eq. (9) moves
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -103,6 +104,9 @@ class EuclideanPlane:
 
     def encode(self, position: PlanePosition) -> dict[str, object]:
         return {"x": float(position[0]), "y": float(position[1])}
+
+    def encode_many(self, positions: Sequence[PlanePosition]) -> list[dict[str, object]]:
+        return [self.encode(p) for p in positions]
 
     def decode(self, data: dict[str, object]) -> PlanePosition:
         try:

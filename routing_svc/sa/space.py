@@ -16,6 +16,7 @@ fleet keeps vehicles sorted by id, so ties break by vehicle id.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Generic, NamedTuple, Protocol, TypeVar, runtime_checkable
 
@@ -115,6 +116,10 @@ class Space(Protocol[P]):
 
     def encode(self, position: P) -> dict[str, object]:
         """A JSON-ready form of a position that round-trips exactly."""
+        ...
+
+    def encode_many(self, positions: Sequence[P]) -> list[dict[str, object]]:
+        """:meth:`encode` of each position (checked together)."""
         ...
 
     def decode(self, data: dict[str, object]) -> P:

@@ -93,7 +93,9 @@ class NetworkEntry:
             )
         if not offset >= 0.0:  # also NaN
             raise InvalidInput(f"offset {offset} on edge {edge!r} is not a number from 0 up")
-        return NetPosition(index, float(offset))
+        # + 0.0: an offset of -0.0 is the edge's start, 0.0 (positions that compare equal
+        # are then also written the same)
+        return NetPosition(index, float(offset) + 0.0)
 
     def describe(self, position: NetPosition) -> dict[str, Any]:
         """``edge, offset, x, y`` (and ``lon, lat`` where the network has a projection).

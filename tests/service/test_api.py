@@ -292,3 +292,15 @@ def test_the_answers_say_every_vehicle_that_moved(client: TestClient) -> None:
     assert backed > 0  # the probe did move vehicles back on this run
     now = client.get("/v1/fleets/f1").json()["vehicles"]
     assert {v["id"]: v["position"] for v in now} == known
+
+
+def test_an_offset_of_minus_zero_is_the_edge_start_and_replays(client: TestClient) -> None:
+    client.post("/v1/fleets", json=fleet_body("f")).raise_for_status()
+    start = {"position": {"edge": edge(3), "offset": -0.0}}
+    same = {"position": {"edge": edge(3), "offset": 0.0}}
+    answers = [client.post("/v1/fleets/f/targets", json=t).json() for t in (start, same)]
+    batch = client.post("/v1/fleets/f/targets:batch", json={"targets": [same, start]}).json()
+    for answer in [*answers, *batch["results"]]:
+        assert str(answer["target"]["offset"]) == "0.0"  # not "-0.0"
+    report = client.app.state.fleets.verify("f")  # type: ignore[attr-defined]
+    assert report["events"] == 5  # rebuilt from the log, each answer the same
