@@ -15,6 +15,7 @@ from routing_svc.network import CompiledNetwork, RoadSpace, Snapper, load_networ
 from routing_svc.network.costs import position_arrays
 from routing_svc.network.identity import network_sha256
 from routing_svc.network.osm_import import looks_like_osm, osm_to_net_bytes
+from routing_svc.network.projection import GeoProjection
 from routing_svc.network.safe_xml import check_net_xml_file, read_net_bytes
 from routing_svc.network.snapping import points_on_edges
 from routing_svc.sa.space import Requirement
@@ -123,33 +124,43 @@ class NetworkEntry:
         network = self.network
         edges, offsets = position_arrays(network, positions, what="position")
         xs, ys = points_on_edges(network, edges, offsets)
-        ids = network.edge_ids
-        projection = network.projection
-        if projection is None or not projection.supported:
+        projection = self._projection()
+        if projection is None:
             return [
-                {"edge": ids[p.edge], "offset": p.offset, "x": x, "y": y}
+                self._place(p, x, y, None)
                 for p, x, y in zip(positions, xs.tolist(), ys.tolist(), strict=True)
             ]
         lons, lats = projection.to_lonlat(xs, ys)
         return [
-            {"edge": ids[p.edge], "offset": p.offset, "x": x, "y": y, "lon": lon, "lat": lat}
+            self._place(p, x, y, (lon, lat))
             for p, x, y, lon, lat in zip(
                 positions, xs.tolist(), ys.tolist(), lons.tolist(), lats.tolist(), strict=True
             )
         ]
 
     def _description(self, position: NetPosition) -> dict[str, Any]:
-        space = self.space("length")
-        x, y = space.xy(position)
+        x, y = self.space("length").xy(position)
+        projection = self._projection()
+        lonlat = None if projection is None else projection.point_to_lonlat(x, y)
+        return self._place(position, x, y, lonlat)
+
+    def _projection(self) -> GeoProjection | None:
+        """The network's geographic projection where it is supported."""
+        projection = self.network.projection
+        return projection if projection is not None and projection.supported else None
+
+    def _place(
+        self, position: NetPosition, x: float, y: float, lonlat: tuple[float, float] | None
+    ) -> dict[str, Any]:
+        """A description (:meth:`describe`) from its coordinates."""
         out: dict[str, Any] = {
             "edge": self.network.edge_ids[position.edge],
             "offset": position.offset,
             "x": x,
             "y": y,
         }
-        projection = self.network.projection
-        if projection is not None and projection.supported:
-            out["lon"], out["lat"] = projection.point_to_lonlat(x, y)
+        if lonlat is not None:
+            out["lon"], out["lat"] = lonlat
         return out
 
     def summary(self) -> dict[str, Any]:

@@ -157,10 +157,7 @@ class FleetRuntime:
             else outcome.consolidation.to_dict(self.base_space.encode),
             dispatch=None if legacy or d.sent is None else d.sent.to_dict(),
         ).to_json()
-        # the description's edge and offset are the target encoded (checked by describing)
-        payload = target_payload(
-            {"edge": described["edge"], "offset": described["offset"]}, required
-        )
+        payload = target_payload(self.base_space.encode(target), required)
         self.version = seq
         self.cost_sum += d.cost
         self.recent.append(d.cost)
