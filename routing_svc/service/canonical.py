@@ -24,11 +24,20 @@ import json
 import math
 from collections.abc import Sequence
 from json.encoder import encode_basestring_ascii
+from operator import itemgetter
 from typing import Any, NamedTuple
 
 import orjson
 
-__all__ = ["TargetResult", "dumps", "result_cost", "same_state", "state_dumps", "target_payload"]
+__all__ = [
+    "TargetResult",
+    "dumps",
+    "dumps_finite",
+    "result_cost",
+    "same_state",
+    "state_dumps",
+    "target_payload",
+]
 
 _CANONICAL = json.JSONEncoder(separators=(",", ":"), sort_keys=True, allow_nan=False)
 
@@ -40,6 +49,34 @@ def dumps(data: Any) -> str:
     allow_nan=False)`` gives, with one encoder kept instead of one per call.
     """
     return _CANONICAL.encode(data)
+
+
+_ORJSON_ONLY = (b"\x7f", b"e-", b"e1", b"e2", b"e3", b"0.0000")
+"""What orjson writes where :func:`dumps` writes otherwise, in an ASCII text: DEL
+unescaped, and the exponent forms of floats below :data:`_FIXED_LOW` (``e-`` or
+``0.0000...``) and from :data:`_FIXED_HIGH` on (``e16`` to ``e308``)."""
+
+
+def dumps_finite(data: Any) -> str:
+    """:func:`dumps` of JSON data whose floats are all finite (a validated request body).
+
+    Written by orjson, and by :func:`dumps` again where orjson's text could differ:
+    any non-ASCII text or a mark of :data:`_ORJSON_ONLY` (found also inside strings,
+    where it only costs the second writing). orjson writes a non-finite float as
+    ``null``, where :func:`dumps` raises: hence the precondition.
+    """
+    try:
+        raw = orjson.dumps(
+            data,
+            option=orjson.OPT_SORT_KEYS
+            | orjson.OPT_PASSTHROUGH_DATACLASS
+            | orjson.OPT_PASSTHROUGH_DATETIME,
+        )
+    except orjson.JSONEncodeError:
+        return dumps(data)
+    if not raw.isascii() or any(mark in raw for mark in _ORJSON_ONLY):
+        return dumps(data)
+    return raw.decode()
 
 
 def state_dumps(data: Any) -> str:
@@ -88,19 +125,34 @@ _FIXED_LOW, _FIXED_HIGH = 1e-4, 1e16
 """Magnitudes ``repr`` writes without an exponent, where orjson writes the same digits."""
 
 
-def _numbers(values: list[object]) -> list[str]:
+def _numbers(values: Sequence[object]) -> list[str]:
     """``[_number(v) for v in values]``, the floats written by one orjson call.
 
     orjson writes the shortest round-trip digits, as ``repr`` does; the two differ
     only in the exponent form, which ``repr`` uses for magnitudes below
-    :data:`_FIXED_LOW` or from :data:`_FIXED_HIGH` on. Those, and anything that is not
-    a float, are written by :func:`_number` (which raises for what the template does
-    not write).
+    :data:`_FIXED_LOW` or from :data:`_FIXED_HIGH` on. orjson writes those with an
+    ``e`` or as ``0.0000...``, a non-finite float as ``null``, ``true`` and ``false``
+    with an ``e``, strings and nested values with quotes or brackets; a list free of
+    these marks holds numbers written as ``repr`` writes them. Otherwise each value is
+    written by :func:`_number` (which raises for what the template does not write).
     """
     try:
-        texts = orjson.dumps(values).decode()[1:-1].split(",")
+        raw = orjson.dumps(values)
     except orjson.JSONEncodeError:
-        texts = []
+        return [_number(v) for v in values]
+    inner = raw[1:-1]
+    if not (
+        b"e" in inner
+        or b"n" in inner
+        or b"0.0000" in inner
+        or b'"' in inner
+        or b"[" in inner
+        or b"{" in inner
+    ):
+        texts = inner.decode().split(",")
+        if len(texts) == len(values):
+            return texts
+    texts = inner.decode().split(",")
     if len(texts) != len(values):
         return [_number(v) for v in values]
     for i, v in enumerate(values):
@@ -154,14 +206,16 @@ def target_payload(target: dict[str, Any], requires: list[str] | None) -> str:
 
 _GEO_KEYS = ("lat", "lon", "offset", "x", "y")
 _PLANE_KEYS = ("offset", "x", "y")
+_geo_floats = itemgetter(*_GEO_KEYS)
+_plane_floats = itemgetter(*_PLANE_KEYS)
 
 
-def _position_floats(described: dict[str, Any]) -> list[Any]:
+def _position_floats(described: dict[str, Any]) -> tuple[Any, ...]:
     """The numbers of a described position, in the order :func:`_position` writes them."""
     if len(described) == 6:
-        return [described[k] for k in _GEO_KEYS]
+        return _geo_floats(described)  # type: ignore[no-any-return]
     if len(described) == 4:
-        return [described[k] for k in _PLANE_KEYS]
+        return _plane_floats(described)  # type: ignore[no-any-return]
     raise _Untemplated
 
 

@@ -23,7 +23,7 @@ from typing import Any
 
 from routing_svc.errors import Conflict, UnknownFleet, UnknownNetwork
 from routing_svc.service.background_solver import ConsolidationSolver
-from routing_svc.service.canonical import dumps
+from routing_svc.service.canonical import dumps, dumps_finite
 from routing_svc.service.creation import build_created_payload
 from routing_svc.service.networks import NetworkEntry, NetworkRegistry
 from routing_svc.service.runtime import FleetRuntime, same_snapshot
@@ -36,9 +36,12 @@ from routing_svc.types import NetPosition
 logger = logging.getLogger(__name__)
 
 
-def request_hash(body: Any) -> str:
-    """A digest of a request body, stored with its idempotency key."""
-    return hashlib.sha256(dumps(body).encode()).hexdigest()
+def request_hash(body: Any, *, finite: bool = False) -> str:
+    """A digest of a request body, stored with its idempotency key: of its canonical
+    text (:func:`dumps`; ``finite``: the body's floats are known finite, and the same
+    text is written by :func:`dumps_finite`)."""
+    text = dumps_finite(body) if finite else dumps(body)
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 class FleetService:
@@ -310,7 +313,8 @@ class FleetService:
         loop: asyncio.AbstractEventLoop | None = None,
     ) -> PendingAnswer:
         """:meth:`submit_targets` for targets already resolved on the fleet's network
-        (``body``, the request the key's digest is taken over, as the route has it)."""
+        (``body``, the request the key's digest is taken over, as the route has it: its
+        positions validated, so its floats are finite)."""
 
         def compute(runtime: FleetRuntime) -> list[NewEvent]:
             out = []
@@ -320,7 +324,7 @@ class FleetService:
                 out.append(NewEvent("target", payload, result))
             return out
 
-        digest = request_hash(body) if idempotency_key is not None else None
+        digest = request_hash(body, finite=True) if idempotency_key is not None else None
         return self.group_commit.submit(
             fleet_id,
             compute,

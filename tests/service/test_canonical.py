@@ -13,6 +13,7 @@ import pytest
 from routing_svc.service.canonical import (
     TargetResult,
     dumps,
+    dumps_finite,
     result_cost,
     same_state,
     state_dumps,
@@ -273,3 +274,38 @@ def test_key_order_and_float_spelling_do_not_make_states_differ() -> None:
     assert same_state('{"b":[1e-07,2.5],"a":null}', '{"a":null,"b":[1e-7,2.5]}')
     assert not same_state('{"a":0.0}', '{"a":-0.0}')
     assert not same_state('{"a":1}', '{"a":1.0}')
+
+
+def _body(rng: np.random.Generator, depth: int = 0) -> Any:
+    """A JSON value with finite floats, strings of every kind (DEL, non-ASCII, the marks
+    of an exponent), big and small integers, booleans and nulls, nested."""
+    kind = int(rng.integers(9 if depth < 3 else 6))
+    if kind == 0:
+        return _float(rng)
+    if kind == 1:
+        return str(rng.choice([*_STRINGS, "del\x7f", "e-5", "ve12", "0.00001", "null"]))
+    if kind == 2:
+        return int(rng.choice([0, -7, 2**53 + 1, 2**63 - 1, 2**64, -(2**70)]))
+    if kind == 3:
+        return bool(rng.random() < 0.5)
+    if kind == 4:
+        return None
+    if kind == 5:
+        return _float(rng)
+    if kind in (6, 7):
+        keys = [*_STRINGS, "offset", "edge", "requires", "e3"]
+        return {str(rng.choice(keys)): _body(rng, depth + 1) for _ in range(rng.integers(0, 4))}
+    return [_body(rng, depth + 1) for _ in range(int(rng.integers(0, 4)))]
+
+
+def test_a_finite_body_is_written_as_the_canonical_encoder_writes_it() -> None:
+    rng = np.random.default_rng(23)
+    for _ in range(20_000):
+        body = _body(rng)
+        assert dumps_finite(body) == dumps(body)
+    for offset in (lambda: round(float(rng.uniform(0, 300)), 2), lambda: _float(rng)):
+        targets = [
+            {"position": {"edge": "-157539101#0", "offset": offset()}, "requires": None}
+            for _ in range(2_000)
+        ]
+        assert dumps_finite({"targets": targets}) == dumps({"targets": targets})
