@@ -310,16 +310,16 @@ class ConsolidationPolicy:
 
     def apply_by(self, *, due: int, epoch: int, accepted_at: int) -> int:
         """The target count by which a consolidation that fell due at ``due`` and is
-        solved away from the fleet must be applied: half the period that would follow
-        it, so that however fast targets come the schedule keeps its shape. The epoch's
+        solved away from the fleet must be applied: when the one after it would fall due
+        were it applied at ``due``, so that however fast targets come the schedule keeps
+        its shape and a solve has the whole period to end in. The epoch's
         first (``due - epoch <= first``: the references are the fleet's start or those
         of the demand before a shift) is applied at once, by the target after ``due``:
         its reservoir is small, and a batch of a few hundred targets must not leave a
         new fleet where it started."""
         if due - epoch <= self.first:
             return due
-        following = self.next_after(now=due, epoch=epoch, accepted_at=accepted_at)
-        return due + (following - due) // 2
+        return self.next_after(now=due, epoch=epoch, accepted_at=accepted_at)
 
 
 @dataclass(frozen=True, slots=True)

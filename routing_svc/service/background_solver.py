@@ -8,8 +8,8 @@ worker process (:meth:`ConsolidationSolver.submit`) and keeps serving with the
 references it has; the first target of the fleet after the solve finished applies
 it, if it is still the due one, and that target's event records it, so that replay
 applies it at the same place without solving (:mod:`routing_svc.service.runtime`).
-Targets that come faster than it is solved wait for it once half the period that follows
-it has passed (:meth:`~routing_svc.sa.consolidation.ConsolidationPolicy.apply_by`), so
+Targets that come faster than it is solved wait for it once the period that follows it
+has passed (:meth:`~routing_svc.sa.consolidation.ConsolidationPolicy.apply_by`), so
 that a burst of targets does not outrun the schedule, and for the epoch's first at once
 (a small reservoir: a batch of a few hundred targets does not leave a new fleet where it
 started); the write path keeps such a fleet's writes queued meanwhile

@@ -185,7 +185,7 @@ class ConsolidationAnswer(Answer):
     due_at: int = Field(description="The target count at which it falls due.")
     apply_by: int = Field(
         description="The target count by which it is applied when targets come faster than "
-        "it is solved: at once for the epoch's first, else half the period after ``due_at``."
+        "it is solved: at once for the epoch's first, else one period after ``due_at``."
     )
 
 

@@ -213,7 +213,7 @@ def test_a_live_server_creates_the_fleet_the_process_creates_skipping_the_same_r
 def test_an_import_whose_consolidations_a_worker_solves_applies_each_call_once_and_replays(
     tmp_path: Path, drt: CompiledNetwork
 ) -> None:
-    calls = random_calls(drt, 1_200, seed=5)
+    calls = random_calls(drt, 2_000, seed=5)
     path = write_csv(
         tmp_path / "calls.csv",
         ["time", "edge", "offset"],
@@ -227,16 +227,18 @@ def test_an_import_whose_consolidations_a_worker_solves_applies_each_call_once_a
         starts = [(calls[i]["edge"], 0.0) for i in range(4)]
         client.create_fleet(fleet_at(starts, rule="consolidating"))
         result = _import(client, path, "f", chunk_size=100)
-        assert (result.applied, result.version_after) == (1_200, 1_201)
+        assert (result.applied, result.version_after) == (2_000, 2_001)
         in_order = sorted(calls, key=lambda c: c["time"])
         assert _event_targets(client, "f") == [(c["edge"], c["offset"]) for c in in_order]
         events = client.service.events("f", after=1, limit=10_000)
         recorded = [e["seq"] for e in events if e["result"].get("consolidated")]
-        assert len(recorded) >= 3  # due at 250 targets, then every 25 % more
+        # due at 250 targets, applied at once; the next ones by the end of the period
+        # after them at the latest: by 750, 1,250 and 1,750 targets
+        assert len(recorded) >= 4
         assert client.service.verify("f")["snapshot_identical"] is True
         state = client.get_fleet("f")
         again = _import(client, path, "f", chunk_size=100)
-        assert (again.applied, again.version_after) == (0, 1_201)
+        assert (again.applied, again.version_after) == (0, 2_001)
         assert client.get_fleet("f") == state
 
 

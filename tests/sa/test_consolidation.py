@@ -810,12 +810,13 @@ def test_apply_by_by_hand() -> None:
     # the epoch's first consolidation is applied by the target after it fell due
     assert policy.apply_by(due=250, epoch=0, accepted_at=0) == 250
     assert policy.apply_by(due=2250, epoch=2000, accepted_at=0) == 2250  # after a shift
-    # a later one by half the period that follows it
-    assert policy.apply_by(due=500, epoch=0, accepted_at=250) == 625  # 500 -> 750
-    assert policy.apply_by(due=1125, epoch=0, accepted_at=1125) == 1406  # 1125 -> 1688
-    assert policy.apply_by(due=2500, epoch=2000, accepted_at=2250) == 2625  # 2500 -> 2750
+    # a later one by the end of the period that follows it: when the next would fall
+    # due, were it applied at once
+    assert policy.apply_by(due=500, epoch=0, accepted_at=250) == 750
+    assert policy.apply_by(due=1125, epoch=0, accepted_at=1125) == 1688
+    assert policy.apply_by(due=2500, epoch=2000, accepted_at=2250) == 2750
     # one turned down at the epoch's start (due 250, not accepted) is not the first again
-    assert policy.apply_by(due=500, epoch=0, accepted_at=0) == 500 + (750 - 500) // 2
+    assert policy.apply_by(due=500, epoch=0, accepted_at=0) == 750
 
 
 def test_turned_down_consolidations_come_ever_more_rarely() -> None:

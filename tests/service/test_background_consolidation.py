@@ -190,8 +190,8 @@ def test_a_solve_that_failed_in_its_worker_is_solved_on_the_write_path() -> None
         fleet.observe(target)
     job = fleet.consolidation_job()
     assert job is not None and job.key[1] == fleet.state.targets
-    # the next ones: applied by half the period after them at the latest
-    assert job.apply_by == job.key[1] + FIRST // 2
+    # the next ones: applied by the end of the period after them at the latest
+    assert job.apply_by == job.key[1] + FIRST
     answer: Future[Any] = Future()
     pending = PendingConsolidation(job, answer)
     assert pending.solved(job.apply_by - 1) is None  # not finished, not late: the target goes on

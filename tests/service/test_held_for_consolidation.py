@@ -28,7 +28,7 @@ from tests.helpers import hotspot_stream, post_batches, replay_ok, spread_fleet_
 
 FIRST = ConsolidationPolicy().first
 """The epoch's first consolidation falls due at target ``FIRST`` and is applied at once;
-the ones after it by half the period that follows them."""
+the ones after it by the end of the period that follows them."""
 
 
 class HandSolver:
@@ -64,7 +64,7 @@ def second_due(
         if len(solver.jobs) == 2:
             job, later = solver.jobs[1]
             assert job.key[1] == k  # due at the k-th target
-            assert job.apply_by > k  # applied by half the period after it
+            assert job.apply_by > k  # applied by the period after it
             return job, later
     raise AssertionError("no second consolidation fell due")
 
