@@ -51,10 +51,19 @@ def dumps(data: Any) -> str:
     return _CANONICAL.encode(data)
 
 
-_ORJSON_ONLY = (b"\x7f", b"e-", b"e1", b"e2", b"e3", b"0.0000")
-"""What orjson writes where :func:`dumps` writes otherwise, in an ASCII text: DEL
-unescaped, and the exponent forms of floats below :data:`_FIXED_LOW` (``e-`` or
+_FLOAT_MARKS = (b"e-", b"e1", b"e2", b"e3", b"0.0000")
+"""What orjson writes in a finite float where ``repr`` (and :func:`dumps`) writes it
+otherwise: the exponent forms of magnitudes below :data:`_FIXED_LOW` (``e-`` or
 ``0.0000...``) and from :data:`_FIXED_HIGH` on (``e16`` to ``e308``)."""
+
+_ORJSON_ONLY = (b"\x7f", *_FLOAT_MARKS)
+"""What orjson writes where :func:`dumps` writes otherwise, in an ASCII text: DEL
+unescaped, and :data:`_FLOAT_MARKS`."""
+
+_NOT_PLAIN_NUMBERS = (b"e", b"n", b"0.0000", b'"', b"[", b"{")
+"""Marks of an orjson list that holds something other than plain numbers written as
+``repr`` writes them: every mark of :data:`_FLOAT_MARKS` holds one of them (``e`` or
+``0.0000``), and ``null``, ``true``, ``false``, strings and nested values hold one too."""
 
 
 def dumps_finite(data: Any) -> str:
@@ -133,7 +142,8 @@ def _numbers(values: Sequence[object]) -> list[str]:
     :data:`_FIXED_LOW` or from :data:`_FIXED_HIGH` on. orjson writes those with an
     ``e`` or as ``0.0000...``, a non-finite float as ``null``, ``true`` and ``false``
     with an ``e``, strings and nested values with quotes or brackets; a list free of
-    these marks holds numbers written as ``repr`` writes them. Otherwise each value is
+    these marks (:data:`_NOT_PLAIN_NUMBERS`) holds numbers written as ``repr`` writes
+    them. Otherwise each value is
     written by :func:`_number` (which raises for what the template does not write).
     """
     try:
@@ -141,13 +151,14 @@ def _numbers(values: Sequence[object]) -> list[str]:
     except orjson.JSONEncodeError:
         return [_number(v) for v in values]
     inner = raw[1:-1]
+    e, n, low, quote, bracket, brace = _NOT_PLAIN_NUMBERS
     if not (
-        b"e" in inner
-        or b"n" in inner
-        or b"0.0000" in inner
-        or b'"' in inner
-        or b"[" in inner
-        or b"{" in inner
+        e in inner
+        or n in inner
+        or low in inner
+        or quote in inner
+        or bracket in inner
+        or brace in inner
     ):
         texts = inner.decode().split(",")
         if len(texts) == len(values):

@@ -8,9 +8,12 @@ import math
 from typing import Any
 
 import numpy as np
+import orjson
 import pytest
 
 from routing_svc.service.canonical import (
+    _FLOAT_MARKS,
+    _NOT_PLAIN_NUMBERS,
     TargetResult,
     dumps,
     dumps_finite,
@@ -296,6 +299,27 @@ def _body(rng: np.random.Generator, depth: int = 0) -> Any:
         keys = [*_STRINGS, "offset", "edge", "requires", "e3"]
         return {str(rng.choice(keys)): _body(rng, depth + 1) for _ in range(rng.integers(0, 4))}
     return [_body(rng, depth + 1) for _ in range(int(rng.integers(0, 4)))]
+
+
+def test_orjson_writes_a_float_otherwise_than_repr_only_with_a_float_mark() -> None:
+    rng = np.random.default_rng(29)
+    differing = 0
+    for exponent in range(-324, 309):
+        for mantissa in (1.0, 5.0, float(rng.uniform(1.0, 10.0))):
+            value = mantissa * 10.0**exponent
+            if not math.isfinite(value):
+                continue
+            for v in (value, -value):
+                text = orjson.dumps(v)
+                if text.decode() != repr(v):
+                    differing += 1
+                    assert any(mark in text for mark in _FLOAT_MARKS), (v, text)
+    # repr writes an exponent of two digits (1e-07) where orjson writes one (1e-7) or
+    # fixed digits: from 1e-9 to below 1e-4, 5 decades of 3 mantissas and 2 signs
+    assert differing == 30
+    # the coarse check of a list of numbers sees every one of these marks
+    for mark in _FLOAT_MARKS:
+        assert any(coarse in mark for coarse in _NOT_PLAIN_NUMBERS), mark
 
 
 def test_a_finite_body_is_written_as_the_canonical_encoder_writes_it() -> None:
