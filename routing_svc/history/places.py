@@ -100,32 +100,48 @@ def _requirement_errors(
     return errors
 
 
-def _resolve_edges(
+def _edge_places(
     table: CallTable, entry: NetworkEntry
-) -> tuple[list[NetPosition | None], dict[int, str]]:
-    """Each edge row's position as the route resolves it, or why not.
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], dict[int, str]]:
+    """Each edge row's edge index and offset as the route resolves them (index ``-1``:
+    the row fails, for the reason given).
 
     The table's edge rows already have a non-empty edge id and a finite offset from 0
-    (:func:`~routing_svc.history.calls.read_calls`); one whose id is not too long
-    passes the route's :class:`EdgePosition` as it stands and goes straight to
-    :meth:`NetworkEntry.resolve_edge`. Any other goes through the model, for its
-    message.
+    (:func:`~routing_svc.history.calls.read_calls`). A row whose id is not too long, is
+    a usable edge of the network, and whose offset is from 0 to the edge's length is
+    what :meth:`NetworkEntry.resolve_edge` accepts, and gets its position, checked for
+    all rows at once (``+ 0.0``: an offset of ``-0.0`` is the edge's start, ``0.0``).
+    Every other row goes one at a time to ``resolve_edge``, or through the route's
+    model when the id is too long, for its message.
     """
-    positions: list[NetPosition | None] = []
+    network = entry.network
+    lookup = network.edge_index.get
+    n = len(table)
+    index = np.fromiter(
+        (lookup(e, -1) if len(e) <= MAX_EDGE_ID else -1 for e in table.edges),
+        dtype=np.int64,
+        count=n,
+    )
+    offsets = table.second + 0.0
+    known = index >= 0
+    lengths = np.where(known, network.length[np.where(known, index, 0)], -math.inf)
+    accepted = known & (offsets >= 0.0) & (offsets <= lengths)
     reasons: dict[int, str] = {}
-    for row, (edge, offset) in enumerate(zip(table.edges, table.second.tolist(), strict=True)):
+    for row in np.flatnonzero(~accepted).tolist():
+        edge, offset = table.edges[row], float(table.second[row])
         try:
             if 0 < len(edge) <= MAX_EDGE_ID and 0.0 <= offset < math.inf:
-                positions.append(entry.resolve_edge(edge, offset))
+                position = entry.resolve_edge(edge, offset)
             else:
-                positions.append(entry.resolve(EdgePosition(edge=edge, offset=offset)))
+                position = entry.resolve(EdgePosition(edge=edge, offset=offset))
+            index[row], offsets[row] = position.edge, position.offset
         except ValidationError as exc:
-            positions.append(None)
+            index[row] = -1
             reasons[row] = str(exc.errors()[0].get("msg"))
         except RoutingSvcError as exc:
-            positions.append(None)
+            index[row] = -1
             reasons[row] = exc.detail
-    return positions, reasons
+    return index, offsets, reasons
 
 
 def place_locally(
@@ -133,10 +149,8 @@ def place_locally(
 ) -> PlacedCalls:
     """Resolve every row on ``entry``; ``vehicle_types=None`` skips the type check."""
     bad = list(table.bad)
-    reasons: dict[int, str] = {}
-    positions: list[NetPosition | None]
     if table.form == "edge":
-        positions, reasons = _resolve_edges(table, entry)
+        index, offsets, reasons = _edge_places(table, entry)
     else:
         if table.form == "lonlat":
             projection = entry.network.projection
@@ -148,22 +162,22 @@ def place_locally(
         else:
             snap = entry.snapper.snap_xy
         positions, reasons = _snap_all(snap, table.first, table.second)
+        index = np.array([-1 if p is None else p.edge for p in positions], dtype=np.int64)
+        offsets = np.array([0.0 if p is None else p.offset for p in positions], dtype=np.float64)
     unmet = _requirement_errors(table.requires, vehicle_types)
-    rows: list[int] = []
-    edges: list[str] = []
-    offsets: list[float] = []
-    edge_ids = entry.network.edge_ids
-    for row, position in enumerate(positions):
-        needs = table.requires[row]
-        reason = reasons.get(row) or (unmet.get(needs) if needs is not None else None)
-        if reason is not None or position is None:
-            bad.append(BadRow(int(table.lines[row]), reason or "no position"))
-            continue
-        rows.append(row)
-        edges.append(edge_ids[position.edge])
-        offsets.append(position.offset)
+    if unmet:
+        for row, needs in enumerate(table.requires):
+            if needs in unmet and row not in reasons:
+                reasons[row] = unmet[needs]
+    placed = index >= 0
+    placed[list(reasons)] = False
+    for row in np.flatnonzero(~placed).tolist():
+        bad.append(BadRow(int(table.lines[row]), reasons.get(row) or "no position"))
     bad.sort(key=lambda r: r.line)
-    return PlacedCalls(np.asarray(rows, dtype=np.int64), edges, offsets, bad)
+    rows = np.flatnonzero(placed)
+    edge_ids = entry.network.edge_ids
+    edges = [edge_ids[i] for i in index[rows].tolist()]
+    return PlacedCalls(rows.astype(np.int64), edges, offsets[rows].tolist(), bad)
 
 
 def place_remotely(

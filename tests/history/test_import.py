@@ -22,7 +22,7 @@ from routing_svc.history import (
 from routing_svc.history.replay import CallChunk, chunk_key
 from routing_svc.network import CompiledNetwork
 from routing_svc.network.snapping import point_on_edge
-from routing_svc.service.schemas import TargetSpec
+from routing_svc.service.schemas import MAX_EDGE_ID, TargetSpec
 from tests.history.conftest import DRT, cli, fleet_at, random_calls, write_csv
 
 
@@ -62,6 +62,41 @@ def test_lonlat_xy_and_edge_places_land_where_the_calls_are(
     result = _import(client, tmp_path / "lonlat.csv", "f", chunk_size=25)
     assert (result.sent, result.applied, result.chunks) == (60, 60, 3)
     assert client.get_fleet("f")["version"] == 61
+
+
+def test_edge_places_are_resolved_as_the_route_resolves_each_one(
+    tmp_path: Path, client: InProcessHistoryClient, drt: CompiledNetwork
+) -> None:
+    calls = random_calls(drt, 40, seed=11)
+    rows: list[list[object]] = [[c["time"], c["edge"], c["offset"]] for c in calls]
+    end = drt.edge_ids[3]
+    rows += [
+        [1.0, end, float(drt.length[3])],  # the edge's very end
+        [2.0, end, float(drt.length[3]) + 0.01],  # past it
+        [3.0, end, "-0.0"],  # the edge's start
+        [4.0, end, 0],
+        [5.0, "no-such-edge", 1.0],
+        [6.0, "x" * 5_000, 1.0],  # an id longer than the route takes
+    ]
+    table = read_calls(write_csv(tmp_path / "edges.csv", ["time", "edge", "offset"], rows))
+    entry = client.service.network("drt")
+    placed = place_locally(table, entry, vehicle_types=None)
+    expected: list[tuple[str, float]] = []
+    failed: list[int] = []
+    for row in range(len(table)):  # the route's resolution, one row at a time
+        edge, offset = table.edges[row], float(table.second[row])
+        try:
+            if len(edge) > MAX_EDGE_ID:  # the route's model refuses it
+                raise InvalidInput("too long")
+            position = entry.resolve_edge(edge, offset)
+        except (InvalidInput, UnknownEdge):
+            failed.append(int(table.lines[row]))
+            continue
+        expected.append((drt.edge_ids[position.edge], position.offset))
+    assert list(zip(placed.edges, placed.offsets, strict=True)) == expected
+    assert [r.line for r in placed.bad] == failed == [43, 46, 47]
+    assert all(math.copysign(1.0, o) == 1.0 for o in placed.offsets)  # no -0.0 is sent
+    assert "beyond the end" in placed.bad[0].reason and "no-such-edge" in placed.bad[1].reason
 
 
 def test_an_unsorted_file_is_replayed_in_time_order(
