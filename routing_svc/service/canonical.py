@@ -52,9 +52,11 @@ def dumps(data: Any) -> str:
 
 
 _FLOAT_MARKS = (b"e-", b"e1", b"e2", b"e3", b"0.0000")
-"""What orjson writes in a finite float where ``repr`` (and :func:`dumps`) writes it
-otherwise: the exponent forms of magnitudes below :data:`_FIXED_LOW` (``e-`` or
-``0.0000...``) and from :data:`_FIXED_HIGH` on (``e16`` to ``e308``)."""
+"""Marks of a finite float that orjson may write otherwise than ``repr`` (and
+:func:`dumps`): magnitudes below :data:`_FIXED_LOW` (``e-`` or ``0.0000...``, where
+``repr`` writes ``e-05``), and an exponent from :data:`_FIXED_HIGH` on without its sign
+(``e16`` to ``e308``; orjson writes ``e+16`` there, as ``repr`` does, and the marks only
+guard against the form)."""
 
 _ORJSON_ONLY = (b"\x7f", *_FLOAT_MARKS)
 """What orjson writes where :func:`dumps` writes otherwise, in an ASCII text: DEL
