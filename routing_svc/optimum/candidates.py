@@ -54,10 +54,14 @@ def candidate_sites(
     demand : DemandDistribution
         Atoms on ``network``.
     max_sites : int, optional
-        If there are more candidates, keep ``max_sites`` of them evenly spaced
-        in the list (deterministic; edge indices follow a space-filling curve,
-        so the kept sites spread over the map). The result is then a heuristic
-        restriction: the optimum over it may be worse than the true optimum.
+        If there are more candidates, keep ``max_sites`` of them, deterministically:
+        every atom and, in the room left, edge ends evenly spaced in edge order
+        when there are fewer atoms than ``max_sites`` (an atom is the one site
+        that serves itself at no cost, so a demand of few places keeps them all);
+        otherwise ``max_sites`` evenly spaced in the whole list. Edge indices
+        follow a space-filling curve, so the kept ends spread over the map. The
+        result is then a heuristic restriction: the optimum over it may be worse
+        than the true optimum.
 
     Returns
     -------
@@ -73,11 +77,20 @@ def candidate_sites(
         raise InvalidInput(f"max_sites must be an integer >= 1, got {max_sites!r}")
     if any(not 0 <= p.edge < network.n_edges for p in demand.positions):
         raise InvalidInput("demand atoms refer to edges that are not in this network")
+    atoms = list(dict.fromkeys(demand.positions))
     ends = [NetPosition(e, float(network.length[e])) for e in range(network.n_edges)]
-    sites = list(dict.fromkeys([*demand.positions, *ends]))
+    sites = list(dict.fromkeys([*atoms, *ends]))  # the atoms first, then the other ends
     if max_sites is None or len(sites) <= max_sites:
         return sites
-    keep = np.unique(np.linspace(0, len(sites) - 1, max_sites).round().astype(np.int64))
+    if len(atoms) < max_sites:
+        return atoms + _evenly_spaced(sites[len(atoms) :], max_sites - len(atoms))
+    return _evenly_spaced(sites, max_sites)
+
+
+def _evenly_spaced(sites: list[NetPosition], count: int) -> list[NetPosition]:
+    """``count`` of ``sites`` (``1 <= count <= len(sites)``) at evenly spaced places in the
+    list, the first always among them."""
+    keep = np.unique(np.linspace(0, len(sites) - 1, count).round().astype(np.int64))
     return [sites[int(i)] for i in keep]
 
 

@@ -10,7 +10,7 @@ import pytest
 from routing_svc.demand import DemandDistribution, uniform_by_length
 from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork, RoadSpace
-from routing_svc.optimum import candidate_sites, solve_pmedian
+from routing_svc.optimum import candidate_sites, solve_demand, solve_pmedian
 from routing_svc.optimum.candidates import distinct_rows
 from routing_svc.types import NetPosition
 from tests.optimum.conftest import brute_force_pmedian
@@ -34,6 +34,24 @@ def test_subsampling_is_deterministic_and_spread(drt_network: CompiledNetwork) -
     assert any(s in atoms for s in first) and any(s not in atoms for s in first)
     with pytest.raises(InvalidInput):
         candidate_sites(drt_network, demand, max_sites=0)
+
+
+def test_a_demand_of_fewer_atoms_than_the_limit_keeps_every_atom(
+    drt_network: CompiledNetwork,
+) -> None:
+    net = drt_network
+    edges = np.random.default_rng(11).choice(net.n_edges, size=5, replace=False)
+    atoms = tuple(NetPosition(int(e), float(net.length[e]) / 3) for e in edges)
+    demand = DemandDistribution.from_masses("five", atoms, np.array([1.0, 2.0, 3.0, 4.0, 5.0]))
+    sites = candidate_sites(net, demand, max_sites=100)
+    assert len(sites) == 100 and sites[:5] == list(atoms)
+    ends = {NetPosition(e, float(net.length[e])) for e in range(net.n_edges)}
+    assert set(sites[5:]) <= ends
+    kept = sorted(s.edge for s in sites[5:])  # spread over the edge order
+    assert kept[0] < net.n_edges // 10 and kept[-1] > net.n_edges - net.n_edges // 10
+    # five vehicles, one on each atom: the p-median costs nothing
+    best = solve_demand(RoadSpace(net), demand, 5, max_sites=100)
+    assert best.objective == 0.0 and set(best.positions) == set(atoms)
 
 
 def reverse_edge(network: CompiledNetwork, e: int) -> int | None:
