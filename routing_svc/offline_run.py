@@ -21,7 +21,7 @@ import numpy as np
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput
-from routing_svc.optimum import expected_cost, solve_demand
+from routing_svc.optimum import expected_cost, gap, solve_demand
 from routing_svc.sa import (
     DEFAULT_RULE,
     Annealing,
@@ -203,7 +203,7 @@ def run_simulation(
             "sites": len(optimum.sites),
             "seconds": optimum_seconds,
         },
-        "gap": (final - optimum.objective) / optimum.objective,
+        "gap": gap(final, optimum.objective),
         "sa_microseconds_per_target": 1e6 * sa_seconds / max(targets - used - 1, 1),
         "sa_first_target_seconds": first_target_seconds,
         "positions": [scenario.describe(p) for p in fleet.state.positions],

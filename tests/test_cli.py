@@ -39,6 +39,27 @@ def test_simulate_on_a_real_network_reports_the_gap_to_the_optimum() -> None:
     assert report["sa_first_target_seconds"] > 0 and report["sa_microseconds_per_target"] > 0
 
 
+def test_simulate_where_the_vehicles_can_cover_every_demand_atom() -> None:
+    # SUMO's Ingolstadt game network keeps a loop of four edges: the exact optimum of
+    # eight vehicles for its hotspot demand costs nothing
+    net = Path(__import__("sumo").SUMO_HOME) / "tools/game/fkk_in/ingolstadt.net.xml.gz"
+    runs = {}
+    for targets in ("100", "1000"):
+        out = cli(
+            "simulate", "--net", str(net), "--vehicles", "8", "--targets", targets,
+            "--start", "random", "--quiet",
+        )  # fmt: skip
+        assert out.returncode == 0, out.stderr
+        runs[targets] = json.loads(out.stdout)
+    for report in runs.values():
+        assert report["optimum"]["objective"] == 0.0 and report["optimum"]["proven_optimal"]
+        assert report["curve"][0]["expected_cost"] > 0.0
+    early, late = runs["100"], runs["1000"]
+    # before its first consolidation the fleet is off an optimum of 0: no finite gap
+    assert early["final_expected_cost"] > 0.0 and early["gap"] is None
+    assert late["final_expected_cost"] == 0.0 and late["gap"] == 0.0
+
+
 def test_simulate_on_the_plane_is_deterministic() -> None:
     args = ("simulate", "--plane", "--vehicles", "3", "--targets", "2000", "--quiet", "--seed", "3")
     first, second = cli(*args), cli(*args)

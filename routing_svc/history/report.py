@@ -145,9 +145,9 @@ def plot_report(
     import matplotlib.pyplot as plt
 
     paths = []
-    curve = report["gap"]["curve"]
+    finite = [c for c in report["gap"]["curve"] if c["gap"] is not None]  # None: optimum 0
     fig, ax = plt.subplots(figsize=(6, 3.5))
-    ax.plot([c["calls"] for c in curve], [100 * c["gap"] for c in curve], marker="o")
+    ax.plot([c["calls"] for c in finite], [100 * c["gap"] for c in finite], marker="o")
     ax.set_xlabel("calls replayed")
     ax.set_ylabel("gap to the history's p-median (%)")
     ax.grid(alpha=0.3)

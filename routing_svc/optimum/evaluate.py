@@ -118,7 +118,7 @@ def expected_cost_from_matrix(
     return math.fsum((weights * best**power).tolist())
 
 
-def gap(value: float, optimum: float) -> float:
+def gap(value: float, optimum: float) -> float | None:
     """Relative gap ``(value - optimum) / optimum`` of a cost to the optimal cost.
 
     Parameters
@@ -130,22 +130,21 @@ def gap(value: float, optimum: float) -> float:
 
     Returns
     -------
-    float
-        ``0.0`` when both are zero; otherwise the relative excess over the
-        optimum (negative if ``value`` beats a non-optimal reference).
+    float or None
+        ``0.0`` when both are zero; ``None`` when ``optimum == 0 < value`` (no
+        finite relative gap exists: a demand of no more places than vehicles);
+        otherwise the relative excess over the optimum (negative if ``value``
+        beats a non-optimal reference).
 
     Raises
     ------
     InvalidInput
-        Non-finite or negative inputs, or ``optimum == 0 < value`` (no finite
-        relative gap exists).
+        Non-finite or negative inputs.
     """
     if not (math.isfinite(value) and math.isfinite(optimum)) or value < 0 or optimum < 0:
         raise InvalidInput(f"gap needs finite costs >= 0, got {value!r} and {optimum!r}")
     if optimum == 0.0:
-        if value == 0.0:
-            return 0.0
-        raise InvalidInput("relative gap to an optimum of 0 is undefined")
+        return 0.0 if value == 0.0 else None
     return (value - optimum) / optimum
 
 

@@ -246,7 +246,10 @@ class OptimumGap(Answer):
     kind: str
     objective: Number
     expected_cost: Number
-    gap: Number
+    gap: Number | None = Field(
+        description="(expected_cost - objective) / objective; 0 when both are 0, null "
+        "when only the optimum is (no finite relative gap)"
+    )
     method: str
     proven_optimal: bool
 

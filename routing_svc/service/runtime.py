@@ -33,6 +33,7 @@ from typing import Any
 from routing_svc.demand import DemandDistribution
 from routing_svc.errors import Conflict, InvalidInput, ReplayMismatch
 from routing_svc.network import RoadSpace
+from routing_svc.optimum import gap
 from routing_svc.sa import Consolidation, Fleet, FleetConfig, Vehicle
 from routing_svc.sa.live import Status, VehicleState
 from routing_svc.service.background_solver import (
@@ -447,7 +448,7 @@ class FleetRuntime:
             "kind": self.reference["optimum"].get("kind", "p-median"),
             "objective": optimum,
             "expected_cost": value,
-            "gap": (value - optimum) / optimum if optimum > 0 else 0.0,
+            "gap": gap(value, optimum),
             "method": self.reference["optimum"]["method"],
             "proven_optimal": self.reference["optimum"]["proven_optimal"],
         }

@@ -70,6 +70,43 @@ def test_the_report_of_a_tiny_history_matches_a_hand_computation(
         assert (tmp_path / "report" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_a_history_of_no_more_places_than_vehicles_has_an_optimum_of_zero(
+    tmp_path: Path, client: InProcessHistoryClient, drt: CompiledNetwork
+) -> None:
+    # calls at 10 m and 20 m along one edge, two vehicles at 5 m and 10 m: the p-median
+    # puts one on each place (cost 0), the fleet serves the call at 20 m from 10 m
+    e = int(np.argmax(drt.length))
+    edge = drt.edge_ids[e]
+    rows = [[f"2024-03-01T0{h}:00:00", edge, 10.0] for h in (7, 8)]
+    rows.append(["2024-03-01T09:00:00", edge, 20.0])
+    path = write_csv(tmp_path / "two.csv", ["time", "edge", "offset"], rows)
+    client.create_fleet(fleet_at([(edge, 5.0), (edge, 10.0)], rule="paper"))
+    table = read_calls(path)
+    entry = client.service.network("drt")
+    placed = place_locally(table, entry, vehicle_types=["default"] * 2)
+    start = client.get_fleet("f")
+    result = replay_history(table, placed, client, "f", progress=False, chunk_size=1)
+    report = write_report(
+        tmp_path / "report",
+        entry,
+        fleet=start,
+        summary=result.summary(),
+        targets=[NetPosition(e, o) for o in placed.offsets],
+        costs=result.costs,
+        hours=table.hours[result.order],
+        checkpoints=result.checkpoints,
+    )
+    gap = report["gap"]
+    assert gap["optimum"]["objective"] == 0.0
+    first = gap["curve"][0]
+    assert first["expected_cost"] == pytest.approx(10.0 / 3.0)  # the call at 20 m, from 10 m
+    assert first["gap"] is None  # no finite relative gap to an optimum of 0
+    assert all(c["gap"] is None or c["expected_cost"] == 0.0 for c in gap["curve"])
+    saved = json.loads((tmp_path / "report" / "report.json").read_text())
+    assert saved["gap"]["curve"][0]["gap"] is None
+    assert (tmp_path / "report" / "history_gap.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 def test_a_live_server_imports_what_the_process_imports(
     tmp_path: Path, drt: CompiledNetwork, live_server: Callable[[], str]
 ) -> None:

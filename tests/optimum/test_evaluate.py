@@ -115,6 +115,7 @@ def test_gap() -> None:
     assert gap(100.0, 100.0) == 0.0
     assert gap(0.0, 0.0) == 0.0
     assert gap(90.0, 100.0) == pytest.approx(-0.1)
-    for value, optimum in [(1.0, 0.0), (-1.0, 1.0), (1.0, math.inf), (math.nan, 1.0)]:
+    assert gap(1.0, 0.0) is None  # no finite relative gap
+    for value, optimum in [(-1.0, 1.0), (1.0, math.inf), (math.nan, 1.0), (1.0, -1.0)]:
         with pytest.raises(InvalidInput):
             gap(value, optimum)

@@ -70,7 +70,7 @@ export class ChartPanel {
     const recent = state.recentCosts.length ? state.recentCosts.reduce((a, b) => a + b, 0) / state.recentCosts.length : null;
     let text = `${state.targets} targets · mean ${fmt(mean)} ${unit} · last ${state.window}: ${fmt(recent)} ${unit}`;
     if (optimum) {
-      text += ` · optimum ${fmt(optimum.objective)} · now ${fmt(optimum.expected_cost)} (gap ${fmt(100 * optimum.gap, 3)} %)`;
+      text += ` · optimum ${fmt(optimum.objective)} · now ${fmt(optimum.expected_cost)} (gap ${optimum.gap === null ? "– (an optimum of 0)" : `${fmt(100 * optimum.gap, 3)} %`})`;
       if (!comparable) text += ` [objective ${state.objective}: values of E c(T), not of the cost]`;
     }
     this.cost.update({
