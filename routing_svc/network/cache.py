@@ -32,7 +32,9 @@ from routing_svc.paths import cache_root
 
 __all__ = ["COMPILE_FORMAT", "default_cache_dir", "load_network"]
 
-COMPILE_FORMAT = 2
+COMPILE_FORMAT = 3
+"""The compiler's version: a change to what it makes of a file, or to which files it refuses,
+raises it, so that no cached result outlives it."""
 
 _DTYPES = {
     "length": np.float64,
@@ -82,7 +84,7 @@ def load_network(
     UnknownNetwork
         If ``path`` is not a readable file.
     InvalidNetwork
-        If the file is hostile, malformed or has no usable edge.
+        If the file is hostile, malformed, has no usable edge or no loop of them.
     InvalidInput
         If ``vclass`` is not a SUMO vehicle class.
     """

@@ -314,7 +314,8 @@ def compile_network(path: Path, *, vclass: str, source_sha256: str) -> CompiledN
     InvalidInput
         If ``vclass`` is not a SUMO vehicle class.
     InvalidNetwork
-        If the file is hostile or malformed, or no edge is usable.
+        If the file is hostile or malformed, no edge is usable, or no two usable edges
+        reach each other (a fleet needs a loop to reach a target behind a vehicle).
     """
     import sumolib
 
@@ -333,6 +334,12 @@ def compile_network(path: Path, *, vclass: str, source_sha256: str) -> CompiledN
     if not objects:
         raise InvalidNetwork(f"network {path.name} has no edge open to vehicle class {vclass!r}")
     keep, n_components = _largest_component(tails, heads, len(objects))
+    if keep.shape[0] == 1 and not np.any((tails == keep[0]) & (heads == keep[0])):
+        raise InvalidNetwork(
+            f"network {path.name} has no loop of edges open to vehicle class {vclass!r}: "
+            "every edge is a way of no return (its largest strongly connected part is "
+            f"one edge, among {n_components}), so no vehicle could reach a target behind it"
+        )
     return _assemble(
         edges, tails, heads, keep, usable, n_components, vclass, source_sha256, projection
     )

@@ -102,6 +102,40 @@ def test_network_without_usable_edges_is_invalid(tmp_path: Path) -> None:
         load_network(path, cache_dir=tmp_path / "cache")
 
 
+ONE_EDGE = (
+    '<net version="1.9"><location netOffset="0,0" convBoundary="0,0,100,0" '
+    'origBoundary="0,0,100,0" projParameter="!"/>'
+    '<edge id="a" from="j0" to="{to}"><lane id="a_0" index="0" speed="10" '
+    'length="100" shape="0,0 100,0"/></edge>'
+    '<junction id="j0" type="priority" x="0" y="0" incLanes="{inc}" intLanes="" shape="0,0"/>'
+    "{j1}{connection}</net>"
+)
+
+
+def test_a_network_without_a_loop_is_invalid(tmp_path: Path) -> None:
+    path = tmp_path / "line.net.xml"
+    j1 = (
+        '<junction id="j1" type="dead_end" x="100" y="0" incLanes="a_0" intLanes="" shape="100,0"/>'
+    )
+    path.write_text(ONE_EDGE.format(to="j1", inc="", j1=j1, connection=""))
+    with pytest.raises(InvalidNetwork, match="no loop of edges open to vehicle class"):
+        load_network(path, cache_dir=tmp_path / "cache")
+    # SUMO's own example of a lone junction: four ways in, four ways out, no way back
+    sumo_home = Path(__import__("sumo").SUMO_HOME)
+    rilsa = sumo_home / "tools/sumolib/scenario/scenarios/RealWorld/RiLSA_example4/net.net.xml"
+    with pytest.raises(InvalidNetwork, match="one edge, among 8"):
+        load_network(rilsa, cache_dir=tmp_path / "cache")
+
+
+def test_one_edge_that_leads_back_to_itself_is_a_loop(tmp_path: Path) -> None:
+    path = tmp_path / "ring.net.xml"
+    connection = '<connection from="a" to="a" fromLane="0" toLane="0" dir="t" state="M"/>'
+    path.write_text(ONE_EDGE.format(to="j0", inc="a_0", j1="", connection=connection))
+    network = load_network(path, cache_dir=tmp_path / "cache")
+    assert network.edge_ids == ("a",)
+    assert network.fwd_indices.tolist() == [0]
+
+
 def test_inconsistent_arrays_are_rejected(drt_case: NetCase) -> None:
     net = drt_case.network
     fields = {name: getattr(net, name) for name in CompiledNetwork.__dataclass_fields__}

@@ -29,6 +29,22 @@ def test_a_network_without_edges_is_refused_and_its_file_taken_back(
     assert client.get("/v1/networks/empty").status_code == 404
 
 
+def test_a_network_without_a_loop_is_refused_and_its_file_taken_back(
+    client: TestClient, tmp_path: Path
+) -> None:
+    sumo_home = Path(__import__("sumo").SUMO_HOME)
+    rilsa = sumo_home / "tools/sumolib/scenario/scenarios/RealWorld/RiLSA_example4/net.net.xml"
+    before = kept_files(tmp_path)
+    listed = client.get("/v1/networks").json()
+    answer = client.post("/v1/networks?name=junction", content=rilsa.read_bytes())
+    assert answer.status_code == 422
+    assert answer.headers["content-type"] == "application/problem+json"
+    assert "no loop of edges" in answer.json()["detail"]
+    assert kept_files(tmp_path) == before
+    assert client.get("/v1/networks").json() == listed
+    assert client.get("/v1/networks/junction").status_code == 404
+
+
 def test_other_content_under_a_known_name_is_a_conflict_that_keeps_no_file(
     client: TestClient, tmp_path: Path
 ) -> None:
