@@ -138,7 +138,9 @@ def instance(
         shifted_optimum, shifted_matrix, shifted_sites = optimum_of(space, shifted, n)
     else:  # a demand without centres to move has no shift
         shifted, shifted_optimum, shifted_matrix, shifted_sites = demand, optimum, matrix, sites
-    edges = np.random.default_rng([seed, 3]).choice(network.n_edges, size=n, replace=False)
+    edges = np.random.default_rng([seed, 3]).choice(  # distinct edges while there are enough
+        network.n_edges, size=n, replace=n > network.n_edges
+    )
     start = [NetPosition(int(e), 0.0) for e in edges]
     return Instance(
         space,

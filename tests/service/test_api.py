@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -189,6 +190,21 @@ def test_reference_demand_gives_a_gap(client: TestClient) -> None:
     assert opt is not None and opt["objective"] > 0
     assert opt["expected_cost"] >= opt["objective"] * (1 - 1e-9)
     assert opt["gap"] == pytest.approx((opt["expected_cost"] - opt["objective"]) / opt["objective"])
+
+
+def test_a_reference_optimum_of_zero_gives_no_finite_gap(client: TestClient) -> None:
+    # SUMO's Ingolstadt game network keeps four edges: eight vehicles can stand on every
+    # atom of this demand, and the fleet made to start elsewhere is not there yet
+    net = Path(__import__("sumo").SUMO_HOME) / "tools/game/fkk_in/ingolstadt.net.xml.gz"
+    client.post("/v1/networks?name=ing", content=net.read_bytes()).raise_for_status()
+    ids = ["-148050455#0", "148050455#0", "-306431310#1", "306431310#1"]
+    vehicles = [{"id": f"v{i}", "position": {"edge": ids[i % 4], "offset": 0.0}} for i in range(8)]
+    demand = {"kind": "hotspots", "count": 3, "spread": 50.0, "seed": 1}
+    body = {"id": "ing", "network": "ing", "vehicles": vehicles, "reference_demand": demand}
+    client.post("/v1/fleets", json=body).raise_for_status()
+    opt = client.get("/v1/fleets/ing/metrics").json()["optimum"]
+    assert opt["objective"] == 0.0 and opt["proven_optimal"]
+    assert opt["expected_cost"] > 0.0 and opt["gap"] is None
 
 
 def test_start_at_the_optimum_of_a_prior_sample(client: TestClient) -> None:
