@@ -133,6 +133,11 @@ def instance(
         recipe = DemandRecipe(Hotspots(recipe.form.count, metres), recipe.profile)
     demand = network_demand(network, recipe, rng=np.random.default_rng([seed, 0]))
     optimum, matrix, sites = optimum_of(space, demand, n)
+    if optimum[0] == 0.0:
+        raise InvalidInput(
+            f"{net.partition('=')[0]}/{n}: the optimum costs 0 (the vehicles can stand on "
+            "every demand atom): there is no relative gap to measure"
+        )
     if isinstance(recipe.form, Hotspots):  # the hotspots move: new centres
         shifted = network_demand(network, recipe, rng=np.random.default_rng([seed, 2]))
         shifted_optimum, shifted_matrix, shifted_sites = optimum_of(space, shifted, n)
