@@ -233,7 +233,10 @@ def starting_positions(
             raise InvalidInput(f"the prior sample has fewer than {n} distinct targets")
         counts = [sample.count(z) for z in sites]
         prior = DemandDistribution.from_masses(f"prior:{len(sample)}", sites, counts)
-        best = solve_demand(scenario.space, prior, n, sites=sites, power=power)
+        # on a road network the service's candidates (the sample and edge ends, as a
+        # fleet created at the optimum of a sample gets); on the plane the sample itself
+        offered = None if scenario.sites is None else sites
+        best = solve_demand(scenario.space, prior, n, sites=offered, power=power)
         return best.positions, len(sample)
     raise InvalidInput(f"--start must be random, first or prior:N with N >= {n}, got {start!r}")
 
