@@ -7,10 +7,12 @@ import json
 from pathlib import Path
 
 import networkx as nx
+import numpy as np
 import pytest
 import sumolib
 
-from routing_svc.errors import InvalidInput, UnknownNetwork
+from routing_svc.errors import InvalidInput, InvalidNetwork, UnknownNetwork
+from routing_svc.network import load_network
 from routing_svc.network.catalogue import (
     GENERATED,
     add_parser,
@@ -100,6 +102,36 @@ def test_shipped_networks_are_listed_in_place(tmp_path: Path) -> None:
     assert len(shipped) >= 4
     assert all(n.path.is_file() and n.path.is_relative_to(home) for n in shipped)
     assert resolve_network("drt", out_dir=tmp_path) == drt.path
+
+
+def test_every_shipped_network_is_a_loop_for_cars_or_refused_with_the_reason(
+    tmp_path: Path,
+) -> None:
+    """What a user gets from each of SUMO's networks known by name: a compiled network in
+    which every edge reaches every other (networkx on its arcs), or a refusal that says
+    whether no edge is open to cars or no loop of them is."""
+    shipped = [n for n in list_networks(out_dir=tmp_path) if n.source == "eclipse-sumo"]
+    verdicts = {}
+    for net in shipped:
+        try:
+            compiled = load_network(net.path, cache_dir=tmp_path / "cache")
+        except InvalidNetwork as refused:
+            edges = sumolib.net.readNet(str(net.path)).getEdges(False)
+            open_to_cars = [e for e in edges if e.allows("passenger")]
+            reason = "no edge open" if not open_to_cars else "no loop of edges open"
+            assert reason in str(refused), (net.name, str(refused))
+            verdicts[net.name] = reason
+            continue
+        graph = nx.DiGraph()
+        graph.add_nodes_from(range(compiled.n_edges))
+        tails = np.repeat(np.arange(compiled.n_edges), np.diff(compiled.fwd_indptr))
+        graph.add_edges_from(zip(tails.tolist(), compiled.fwd_indices.tolist(), strict=True))
+        assert nx.is_strongly_connected(graph), net.name
+        assert compiled.n_edges > 1 or graph.has_edge(0, 0), net.name
+        verdicts[net.name] = "compiled"
+    assert verdicts["drt"] == "compiled" and verdicts["bs3d"] == "compiled"
+    assert verdicts["corridor"] == "no loop of edges open"  # one way through, no way back
+    assert "compiled" in verdicts.values() and len(set(verdicts.values())) >= 2
 
 
 def test_resolve_network(tmp_path: Path) -> None:
