@@ -5,11 +5,18 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
-from routing_svc.history import InProcessHistoryClient, place_locally, read_calls, replay_history
+from routing_svc.history import (
+    ImportResult,
+    InProcessHistoryClient,
+    place_locally,
+    read_calls,
+    replay_history,
+)
 from routing_svc.history.report import service_levels, write_report
 from routing_svc.network import CompiledNetwork
 from routing_svc.types import NetPosition
@@ -29,22 +36,22 @@ def test_service_levels_by_hour_match_a_hand_computation() -> None:
     assert levels["all"]["p50"] == 400.0
 
 
-def test_the_report_of_a_tiny_history_matches_a_hand_computation(
-    tmp_path: Path, client: InProcessHistoryClient, drt: CompiledNetwork
-) -> None:
-    # five calls at 10 m and one at 20 m along one edge, one vehicle waiting at 10 m:
-    # the p-median is that vehicle's place, at cost (1/6) * 10 m
-    e = int(np.argmax(drt.length))
-    edge = drt.edge_ids[e]
-    rows = [[f"2024-03-01T0{h}:00:00", edge, 10.0] for h in (7, 7, 8, 8, 9)]
-    rows.append(["2024-03-01T09:30:00", edge, 20.0])
-    path = write_csv(tmp_path / "tiny.csv", ["time", "edge", "offset"], rows)
-    client.create_fleet(fleet_at([(edge, 10.0)], rule="consolidating"))
+def import_on_one_edge(
+    tmp_path: Path,
+    client: InProcessHistoryClient,
+    e: int,
+    rows: list[list[Any]],
+    *,
+    chunk_size: int,
+) -> tuple[ImportResult, dict[str, Any]]:
+    """Import ``rows`` (time, edge, offset on edge ``e`` of ``drt``) into fleet ``f`` and
+    write its report into ``tmp_path / "report"``."""
+    path = write_csv(tmp_path / "calls.csv", ["time", "edge", "offset"], rows)
     table = read_calls(path)
     entry = client.service.network("drt")
-    placed = place_locally(table, entry, vehicle_types=["default"])
     start = client.get_fleet("f")
-    result = replay_history(table, placed, client, "f", progress=False, chunk_size=2)
+    placed = place_locally(table, entry, vehicle_types=["default"] * len(start["vehicles"]))
+    result = replay_history(table, placed, client, "f", progress=False, chunk_size=chunk_size)
     report = write_report(
         tmp_path / "report",
         entry,
@@ -55,6 +62,20 @@ def test_the_report_of_a_tiny_history_matches_a_hand_computation(
         hours=table.hours[result.order],
         checkpoints=result.checkpoints,
     )
+    return result, report
+
+
+def test_the_report_of_a_tiny_history_matches_a_hand_computation(
+    tmp_path: Path, client: InProcessHistoryClient, drt: CompiledNetwork
+) -> None:
+    # five calls at 10 m and one at 20 m along one edge, one vehicle waiting at 10 m:
+    # the p-median is that vehicle's place, at cost (1/6) * 10 m
+    e = int(np.argmax(drt.length))
+    edge = drt.edge_ids[e]
+    rows = [[f"2024-03-01T0{h}:00:00", edge, 10.0] for h in (7, 7, 8, 8, 9)]
+    rows.append(["2024-03-01T09:30:00", edge, 20.0])
+    client.create_fleet(fleet_at([(edge, 10.0)], rule="consolidating"))
+    result, report = import_on_one_edge(tmp_path, client, e, rows, chunk_size=2)
     gap = report["gap"]
     assert gap["optimum"]["objective"] == pytest.approx(10.0 / 6.0)
     assert gap["curve"][0]["expected_cost"] == pytest.approx(10.0 / 6.0)
@@ -79,23 +100,8 @@ def test_a_history_of_no_more_places_than_vehicles_has_an_optimum_of_zero(
     edge = drt.edge_ids[e]
     rows = [[f"2024-03-01T0{h}:00:00", edge, 10.0] for h in (7, 8)]
     rows.append(["2024-03-01T09:00:00", edge, 20.0])
-    path = write_csv(tmp_path / "two.csv", ["time", "edge", "offset"], rows)
     client.create_fleet(fleet_at([(edge, 5.0), (edge, 10.0)], rule="paper"))
-    table = read_calls(path)
-    entry = client.service.network("drt")
-    placed = place_locally(table, entry, vehicle_types=["default"] * 2)
-    start = client.get_fleet("f")
-    result = replay_history(table, placed, client, "f", progress=False, chunk_size=1)
-    report = write_report(
-        tmp_path / "report",
-        entry,
-        fleet=start,
-        summary=result.summary(),
-        targets=[NetPosition(e, o) for o in placed.offsets],
-        costs=result.costs,
-        hours=table.hours[result.order],
-        checkpoints=result.checkpoints,
-    )
+    _, report = import_on_one_edge(tmp_path, client, e, rows, chunk_size=1)
     gap = report["gap"]
     assert gap["optimum"]["objective"] == 0.0
     first = gap["curve"][0]
