@@ -122,7 +122,8 @@ def test_the_commit_runs_on_the_committer_thread_and_the_loop_serves_while_it_wa
         (_, second) = await future
         await busy
         await service.drain()
-        timed_out = handoff_timeouts() - timeouts_before == 1
+        # that hand-over timed out; on a loaded machine a later one may time out too
+        timed_out = handoff_timeouts() - timeouts_before >= 1
         return first, second, pending_while_busy, timed_out
 
     sa.event.listen(service.log.engine, "commit", commit_seen)
