@@ -55,6 +55,7 @@ from routing_svc.network import RoadSpace, load_network
 from routing_svc.network.catalogue import named_network, resolve_network
 from routing_svc.network.costs import CostKind
 from routing_svc.optimum import MAX_SITES, expected_cost, solve_demand, solve_pmedian
+from routing_svc.optimum import gap as relative_gap
 from routing_svc.sa import Fleet, Objective, Rule, Vehicle, learning_config
 from routing_svc.types import FloatArray, NetPosition
 
@@ -163,7 +164,9 @@ def instance(
 
 def gap(space: RoadSpace, positions: list[NetPosition], demand: Any, optimum: float) -> float:
     value = expected_cost(space, positions, np.ones(len(positions)), demand)
-    return (value - optimum) / optimum
+    relative = relative_gap(value, optimum)
+    assert relative is not None  # instance() refuses an optimum of 0
+    return relative
 
 
 def run_rule(
