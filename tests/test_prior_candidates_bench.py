@@ -1,0 +1,40 @@
+"""``bench/prior_candidates.py`` prints one JSON document whose summary is that of its
+records, and whose cross-validated rule takes the gap of the rule it chose."""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_prior_candidates_report_is_its_records(tmp_path: Path) -> None:
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "prior_candidates.py"), "--nets", "grid",
+         "--vehicles", "2", "--demands", "hotspots:3,uniform", "--samples", "300",
+         "--seeds", "0,1"],
+        capture_output=True, text=True, timeout=600, cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    records = report["records"]
+    assert len(records) == 4
+    for r in records:
+        gaps = r["gaps"]
+        assert set(gaps) == {"default", "ends", "cross_validated"}
+        assert all(math.isfinite(g) and g > -0.5 for g in gaps.values())
+        assert gaps["cross_validated"] == gaps[r["cross_validated_choice"]]
+    summary = report["by_sample_size"]["300"]
+    for rule in ("default", "ends", "cross_validated"):
+        medians = [
+            statistics.median(r["gaps"][rule] for r in records if r["demand"] == demand)
+            for demand in ("hotspots:3", "uniform")
+        ]
+        assert summary[rule]["mean_of_medians"] == statistics.fmean(medians)
+        assert summary[rule]["worst"][0] == max(medians)
+    assert summary["default"]["ratio_to_default"] == 1.0
