@@ -264,6 +264,27 @@ def _why(figures: dict[str, dict[str, Any]], checks: list[dict[str, Any]]) -> li
     return notes
 
 
+def _where_references_stand(figures: dict[str, dict[str, Any]], history: int) -> list[str]:
+    """Where ``sa``'s mean misses ``optimum``'s goal: how far its references are from
+    ``optimum``'s by the demand's expected free-flow wait, beside the seeds' spread."""
+    sa, optimum = figures.get("sa", {}), figures.get("optimum", {})
+    if goal_checks(figures)[2]["met"] or not all(
+        math.isfinite(row.get("expected_wait_s", math.nan)) for row in (sa, optimum)
+    ):
+        return []
+    expected, best = sa["expected_wait_s"], optimum["expected_wait_s"]
+    measured, measured_best = sa["mean_wait_s"], optimum["mean_wait_s"]
+    return [
+        f"- Where the references stand: the demand's expected free-flow wait is "
+        f"{expected:.1f} s from `sa`'s references at the end of the run and {best:.1f} s "
+        f"from `optimum`'s ({100 * (expected / best - 1):+.1f} %); `sa` started at the "
+        f"p-median of its {history} historical requests. The measured means differ by "
+        f"{100 * (measured / measured_best - 1):+.1f} %, with standard deviations over "
+        f"the seeds of {_num(sa['mean_wait_sd_s'])} s (`sa`) and "
+        f"{_num(optimum['mean_wait_sd_s'])} s (`optimum`)."
+    ]
+
+
 def section(experiment: Experiment, figures: dict[str, dict[str, Any]], pictures: Any) -> list[str]:
     """One experiment's part of the document."""
     spec = experiment.spec
@@ -285,6 +306,7 @@ def section(experiment: Experiment, figures: dict[str, dict[str, Any]], pictures
             + "."
         )
     lines += _why(figures, goal_checks(figures))
+    lines += _where_references_stand(figures, spec.history)
     if spec.mode == "incidents" and not goal_checks(figures)[2]["met"]:
         lines.append(
             f"- For incidents `optimum`'s references are the p-median of {spec.incident_sample} "
@@ -672,6 +694,9 @@ def main(argv: list[str] | None = None) -> int:
                 else write_figures(result, out_dir=FIGURES, prefix=experiment.key)
             )
         figures = {name: policy_figures(runs) for name, runs in by_policy.items()}
+        for name, row in figures.items():  # the demand's expected wait from the references
+            expected = summary["policies"].get(name, {}).get("final_expected_wait_s")
+            row["expected_wait_s"] = math.nan if expected is None else float(expected)
         sections += section(experiment, figures, pictures)
         all_figures[experiment.key] = figures
         report[experiment.key] = {

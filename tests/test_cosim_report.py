@@ -3,9 +3,12 @@ with a one-line error and leaves the report it would overwrite as it was."""
 
 from __future__ import annotations
 
+import importlib.util
+import math
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 WRITTEN = [ROOT / "docs" / "cosim.md", ROOT / "docs" / "figures" / "cosim" / "report.json"]
@@ -25,3 +28,32 @@ def test_render_only_without_finished_runs_writes_nothing(tmp_path: Path) -> Non
     assert done.returncode == 2, done.stderr
     assert "no experiment has finished in" in done.stderr.strip().splitlines()[-1]
     assert after == before
+
+
+def _report_module() -> Any:
+    spec = importlib.util.spec_from_file_location(
+        "cosim_report", ROOT / "bench" / "cosim_report.py"
+    )
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up by name
+    spec.loader.exec_module(module)
+    return module
+
+
+def _row(mean: float, sd: float, expected: float) -> dict[str, float]:
+    return {"mean_wait_s": mean, "mean_wait_sd_s": sd, "expected_wait_s": expected}
+
+
+def test_a_missed_optimum_goal_says_where_the_references_stand() -> None:
+    report = _report_module()
+    figures = {"sa": _row(159.0, 6.0, 59.0), "optimum": _row(149.0, 9.0, 57.6)}
+    (line,) = report._where_references_stand(figures, 1000)
+    # 59.0 / 57.6 - 1 = +2.43 %; 159 / 149 - 1 = +6.71 %, by hand
+    assert "59.0 s from `sa`'s references" in line and "57.6 s" in line
+    assert "(+2.4 %)" in line and "differ by +6.7 %" in line
+    assert "of its 1000 historical requests" in line and "6 s (`sa`) and 9 s (`optimum`)" in line
+    met = {"sa": _row(156.0, 6.0, 59.0), "optimum": _row(149.0, 9.0, 57.6)}  # 1.047: met
+    assert report._where_references_stand(met, 1000) == []
+    unknown = {"sa": _row(159.0, 6.0, math.nan), "optimum": _row(149.0, 9.0, 57.6)}
+    assert report._where_references_stand(unknown, 1000) == []
