@@ -204,8 +204,8 @@ def _check_text(check: dict[str, Any]) -> str:
     if not math.isfinite(ratio):
         return "n/a"
     if check["met"]:
-        return f"{ratio:.2f} met"
-    return f"{ratio:.2f} **missed** by {check['shortfall_s']:.0f} s"
+        return f"{ratio:.3f} met"
+    return f"{ratio:.3f} **missed** by {check['shortfall_s']:.0f} s"
 
 
 def _table(figures: dict[str, dict[str, Any]]) -> list[str]:
@@ -335,7 +335,7 @@ def headline(all_figures: dict[str, dict[str, dict[str, Any]]]) -> list[str]:
         sa = figures.get("sa", {})
         p90 = checks[1]["ratio"]
         lines.append(
-            f"| {key} | {waits} | {_num(p90, '.2f')} "
+            f"| {key} | {waits} | {_num(p90, '.3f')} "
             f"| {_num(sa.get('requests_per_vehicle_hour', math.nan), '.2f')}, "
             f"{_num(100 * sa.get('busy_fraction', math.nan))}% "
             f"| {sum(c['met'] for c in checks)}/{len(checks)} |"
