@@ -41,13 +41,6 @@ RULES = ("default", "ends", "cross_validated")
 FOLDS = 5
 
 
-def empirical(sample: list[NetPosition]) -> DemandDistribution[NetPosition]:
-    """The sample as a distribution: each distinct place weighted by its count."""
-    places = list(dict.fromkeys(sample))
-    counts = [sample.count(z) for z in places]
-    return DemandDistribution.from_masses("sample", places, counts)
-
-
 def edge_ends(space: RoadSpace) -> list[NetPosition]:
     """The end of every edge, at most ``MAX_SITES`` of them evenly spaced in edge order
     (``candidate_sites`` of a distribution whose atoms are the ends)."""
@@ -60,7 +53,8 @@ def edge_ends(space: RoadSpace) -> list[NetPosition]:
 def fitted(space: RoadSpace, sample: list[NetPosition], n: int, rule: str) -> list[NetPosition]:
     """The p-median of ``sample`` over the candidate sites of ``rule``."""
     sites = None if rule == "default" else edge_ends(space)
-    return solve_demand(space, empirical(sample), n, sites=sites, method="heuristic").positions
+    demand = DemandDistribution.of_targets("sample", sample)
+    return solve_demand(space, demand, n, sites=sites, method="heuristic").positions
 
 
 def held_out_costs(space: RoadSpace, sample: list[NetPosition], n: int) -> dict[str, float]:

@@ -228,11 +228,10 @@ def starting_positions(
     kind, _, count = start.partition(":")
     if kind == "prior" and count.isdigit() and int(count) >= n:
         sample = stream[: min(int(count), len(stream))]
-        sites = list(dict.fromkeys(sample))
-        if len(sites) < n:
+        prior = DemandDistribution.of_targets(f"prior:{len(sample)}", sample)
+        if len(prior) < n:
             raise InvalidInput(f"the prior sample has fewer than {n} distinct targets")
-        counts = [sample.count(z) for z in sites]
-        prior = DemandDistribution.from_masses(f"prior:{len(sample)}", sites, counts)
+        sites = list(prior.positions)
         # on a road network the service's candidates (the sample and edge ends, as a
         # fleet created at the optimum of a sample gets); on the plane the sample itself
         offered = None if scenario.sites is None else sites

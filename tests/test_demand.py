@@ -269,3 +269,12 @@ def test_missing_and_oversized_files(drt: CompiledNetwork, tmp_path: Path) -> No
     big.write_text(f"{drt.edge_ids[0]},1\n" * 100)
     with pytest.raises(PayloadTooLarge):
         read_edge_weights(big, known_edges=drt.edge_index, max_bytes=50)
+
+
+def test_of_targets_weighs_each_distinct_target_by_its_count() -> None:
+    a, b, c = NetPosition(0, 1.0), NetPosition(2, 0.5), NetPosition(1, 3.0)
+    demand = DemandDistribution.of_targets("s", [b, a, b, c, b, a])
+    assert demand.positions == (b, a, c)  # the order of first occurrence
+    np.testing.assert_array_equal(demand.weights, [3 / 6, 2 / 6, 1 / 6])
+    with pytest.raises(InvalidInput):
+        DemandDistribution.of_targets("empty", [])

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
@@ -121,6 +122,19 @@ class DemandDistribution(Generic[P]):
         if keep.size == 0 or not math.isfinite(total) or total <= 0.0:
             raise InvalidInput("demand masses must have a positive finite sum")
         return cls(name, tuple(positions[int(i)] for i in keep), mass[keep] / total)
+
+    @classmethod
+    def of_targets(cls, name: str, targets: Sequence[P]) -> DemandDistribution[P]:
+        """The empirical distribution of ``targets``: each distinct target weighted by
+        how often it occurs, in the order of first occurrence.
+
+        Raises
+        ------
+        InvalidInput
+            No targets.
+        """
+        counts = Counter(targets)
+        return cls.from_masses(name, list(counts), list(counts.values()))
 
     @property
     def kind(self) -> str:
