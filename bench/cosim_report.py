@@ -264,11 +264,13 @@ def _why(figures: dict[str, dict[str, Any]], checks: list[dict[str, Any]]) -> li
     return notes
 
 
-def _where_references_stand(figures: dict[str, dict[str, Any]], history: int) -> list[str]:
-    """Where ``sa``'s mean misses ``optimum``'s goal: how far its references are from
-    ``optimum``'s by the demand's expected free-flow wait, beside the seeds' spread."""
+def _where_references_stand(
+    figures: dict[str, dict[str, Any]], checks: list[dict[str, Any]], history: int
+) -> list[str]:
+    """Where ``sa``'s mean misses ``optimum``'s goal (``checks[2]``): how far its references
+    are from ``optimum``'s by the demand's expected free-flow wait, beside the seeds' spread."""
     sa, optimum = figures.get("sa", {}), figures.get("optimum", {})
-    if goal_checks(figures)[2]["met"] or not all(
+    if checks[2]["met"] or not all(
         math.isfinite(row.get("expected_wait_s", math.nan)) for row in (sa, optimum)
     ):
         return []
@@ -305,9 +307,10 @@ def section(experiment: Experiment, figures: dict[str, dict[str, Any]], pictures
             + "; ".join(f"{c['goal']}: {_check_text(c)}" for c in checks)
             + "."
         )
-    lines += _why(figures, goal_checks(figures))
-    lines += _where_references_stand(figures, spec.history)
-    if spec.mode == "incidents" and not goal_checks(figures)[2]["met"]:
+    checks = goal_checks(figures)
+    lines += _why(figures, checks)
+    lines += _where_references_stand(figures, checks, spec.history)
+    if spec.mode == "incidents" and not checks[2]["met"]:
         lines.append(
             f"- For incidents `optimum`'s references are the p-median of {spec.incident_sample} "
             "incidents recorded in the same traffic as the run (apart from the ones served); "

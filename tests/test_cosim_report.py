@@ -48,12 +48,12 @@ def _row(mean: float, sd: float, expected: float) -> dict[str, float]:
 def test_a_missed_optimum_goal_says_where_the_references_stand() -> None:
     report = _report_module()
     figures = {"sa": _row(159.0, 6.0, 59.0), "optimum": _row(149.0, 9.0, 57.6)}
-    (line,) = report._where_references_stand(figures, 1000)
+    (line,) = report._where_references_stand(figures, report.goal_checks(figures), 1000)
     # 59.0 / 57.6 - 1 = +2.43 %; 159 / 149 - 1 = +6.71 %, by hand
     assert "59.0 s from `sa`'s references" in line and "57.6 s" in line
     assert "(+2.4 %)" in line and "differ by +6.7 %" in line
     assert "of its 1000 historical requests" in line and "6 s (`sa`) and 9 s (`optimum`)" in line
     met = {"sa": _row(156.0, 6.0, 59.0), "optimum": _row(149.0, 9.0, 57.6)}  # 1.047: met
-    assert report._where_references_stand(met, 1000) == []
+    assert report._where_references_stand(met, report.goal_checks(met), 1000) == []
     unknown = {"sa": _row(159.0, 6.0, math.nan), "optimum": _row(149.0, 9.0, 57.6)}
-    assert report._where_references_stand(unknown, 1000) == []
+    assert report._where_references_stand(unknown, report.goal_checks(unknown), 1000) == []
