@@ -30,9 +30,11 @@ import time
 from typing import Any
 
 import numpy as np
-from learning import NETWORKS, gap, instance
+from learning import NETWORKS, gap, instance, network_file
 
 from routing_svc.demand import DemandDistribution
+from routing_svc.demand.spec import parse_demand_spec
+from routing_svc.errors import InvalidInput, UnknownNetwork
 from routing_svc.network import RoadSpace
 from routing_svc.optimum import MAX_SITES, candidate_sites, solve_demand
 from routing_svc.types import NetPosition
@@ -115,22 +117,41 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
     return {"median_over_seeds": medians, "by_sample_size": by_size}
 
 
+def counts(text: str) -> list[int]:
+    """A comma list of whole numbers >= 0 (argparse turns the ValueError into an error)."""
+    values = [int(part) for part in text.split(",")]
+    if any(v < 0 for v in values):
+        raise ValueError(text)
+    return values
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--nets", default=",".join(NETWORKS))
-    p.add_argument("--vehicles", default="8,20")
+    p.add_argument("--vehicles", type=counts, default="8,20")
     p.add_argument("--demands", default="hotspots:3,uniform")
-    p.add_argument("--samples", default="300,1000")
-    p.add_argument("--seeds", default="0,1,2")
+    p.add_argument("--samples", type=counts, default="300,1000")
+    p.add_argument("--seeds", type=counts, default="0,1,2")
     args = p.parse_args()
+    try:
+        for net in args.nets.split(","):
+            network_file(net)
+        for demand in args.demands.split(","):
+            parse_demand_spec(demand)
+    except (InvalidInput, UnknownNetwork) as e:
+        p.error(str(e))
+    if min(args.vehicles) < 1:
+        p.error("--vehicles: a fleet has at least one vehicle")
+    if min(args.samples) < max(args.vehicles):
+        p.error("every sample must hold at least as many targets as the largest fleet")
     started = time.perf_counter()
     records = [
-        job(net, int(n), demand, int(size), int(seed))
+        job(net, n, demand, size, seed)
         for net in args.nets.split(",")
-        for n in args.vehicles.split(",")
+        for n in args.vehicles
         for demand in args.demands.split(",")
-        for size in args.samples.split(",")
-        for seed in args.seeds.split(",")
+        for size in args.samples
+        for seed in args.seeds
     ]
     report = {
         "benchmark": "prior_candidates",

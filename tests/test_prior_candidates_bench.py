@@ -38,3 +38,19 @@ def test_prior_candidates_report_is_its_records(tmp_path: Path) -> None:
         assert summary[rule]["mean_of_medians"] == statistics.fmean(medians)
         assert summary[rule]["worst"][0] == max(medians)
     assert summary["default"]["ratio_to_default"] == 1.0
+
+
+def test_prior_candidates_refuses_bad_options_before_any_work(tmp_path: Path) -> None:
+    for options, message in (
+        (["--nets", "nosuch"], "'nosuch' is neither a known network"),
+        (["--vehicles", "0"], "a fleet has at least one vehicle"),
+        (["--samples", "5", "--vehicles", "8"], "at least as many targets as the largest fleet"),
+        (["--demands", "bogus:1"], "--demand must be"),
+    ):
+        done = subprocess.run(
+            [sys.executable, str(ROOT / "bench" / "prior_candidates.py"), *options],
+            capture_output=True, text=True, timeout=300, cwd=tmp_path,
+        )  # fmt: skip
+        assert done.returncode == 2, (options, done.stderr)
+        assert message in done.stderr.strip().splitlines()[-1]
+        assert done.stdout == ""
