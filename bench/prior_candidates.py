@@ -37,6 +37,7 @@ from routing_svc.demand.spec import parse_demand_spec
 from routing_svc.errors import InvalidInput, UnknownNetwork
 from routing_svc.network import RoadSpace
 from routing_svc.optimum import MAX_SITES, candidate_sites, solve_demand
+from routing_svc.sim.command import parse_seeds
 from routing_svc.types import NetPosition
 
 RULES = ("default", "ends", "cross_validated")
@@ -117,21 +118,13 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
     return {"median_over_seeds": medians, "by_sample_size": by_size}
 
 
-def counts(text: str) -> list[int]:
-    """A comma list of whole numbers >= 0 (argparse turns the ValueError into an error)."""
-    values = [int(part) for part in text.split(",")]
-    if any(v < 0 for v in values):
-        raise ValueError(text)
-    return values
-
-
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--nets", default=",".join(NETWORKS))
-    p.add_argument("--vehicles", type=counts, default="8,20")
+    p.add_argument("--vehicles", type=parse_seeds, default="8,20")
     p.add_argument("--demands", default="hotspots:3,uniform")
-    p.add_argument("--samples", type=counts, default="300,1000")
-    p.add_argument("--seeds", type=counts, default="0,1,2")
+    p.add_argument("--samples", type=parse_seeds, default="300,1000")
+    p.add_argument("--seeds", type=parse_seeds, default="0,1,2")
     args = p.parse_args()
     try:
         for net in args.nets.split(","):

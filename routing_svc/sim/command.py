@@ -42,13 +42,13 @@ __all__ = ["add_parser", "parse_seeds", "run"]
 
 
 def parse_seeds(text: str) -> tuple[int, ...]:
-    """``--seeds``: a comma list of integers >= 0."""
+    """``--seeds`` (or any option of counts): a comma list of integers >= 0."""
     try:
         seeds = tuple(int(s) for s in text.split(",") if s.strip())
     except ValueError:
-        raise argparse.ArgumentTypeError(f"seeds must be integers, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected integers, got {text!r}") from None
     if not seeds or any(s < 0 for s in seeds):
-        raise argparse.ArgumentTypeError("give at least one seed >= 0")
+        raise argparse.ArgumentTypeError("give at least one integer >= 0")
     return seeds
 
 
