@@ -17,7 +17,8 @@ experiment compares ``sa``, ``sa-available``, ``optimum``, ``sumo-stop`` and
 operations issue: ``sa``'s mean wait at most 0.8 times ``sumo-stop``'s, its
 90th-percentile wait at most 0.8 times ``sumo-stop``'s, and its mean wait at
 most 1.05 times ``optimum``'s. 3 seeds by default (``--seeds 0,1,2``);
-``--only`` picks experiments.
+``--only`` picks experiments. The sections measured with commands of their
+own (``bench/cosim_sections/*.md``) are appended as they are written.
 """
 
 from __future__ import annotations
@@ -440,188 +441,12 @@ routing-svc cosim --net drt --vehicles 10 --hours 2 --seeds 0,1,2 --history 1000
 """
 
 
-#: The stands measurement (its own commands, not this report's runs), kept at the end.
-STANDS = """
-## Stands
-
-`routing-svc cosim --stands FILE.add.xml` restricts the service's fleets to the usable
-parkingAreas of a SUMO additional file (capacity as `routing-svc stands` reads it): every
-vehicle's reference is served from its stand, an idle vehicle parks in its stand's
-parkingArea (SUMO's stop output `stops-<policy>.xml` names it) and leaves it when
-dispatched, `optimum` is the optimum over the stands, and `sumo-taxistand` uses the
-file's parkingAreas as its taxi stands. The summary's `stands` names the file and counts
-the stands; `unparked` counts the vehicles that found their parkingArea full.
-
-Claim: on Bad Hersfeld with the shared parking file (406 of its 409 parkingAreas usable),
-restricting `sa` to stands costs about 8 % of mean wait and 4 % of p90 wait against free
-positions (three seeds, 10 vehicles, 1 h of persons at 40/h, background 3 vehicles/h/km,
-the co-simulation's defaults otherwise). The expected free-flow wait of the optimum over
-the stands, 83.6 s, is 1.07 x the free optimum's 77.8 s. Measured on 2026-12-04 (`700f4bd`),
-one command per seed and form:
-
-```
-for s in 0 1 2; do
-  routing-svc cosim --net ../shared/nets/badhersfeld.net.xml.gz --mode persons --vehicles 10 \\
-      --hours 1 --rate 40 --density 3 --policies sa --seeds $s --workers 1 --no-plots \\
-      [--stands ../shared/nets/badhersfeld.parking.add.xml]
-done
-```
-
-| `sa`, mean / p90 wait (s) | seed 0 | seed 1 | seed 2 | mean of the seeds |
-|---|---|---|---|---|
-| free positions | 253 / 475 | 347 / 576 | 367 / 583 | 322 / 545 |
-| stands | 250 / 432 | 386 / 632 | 403 / 638 | 347 / 567 |
-| stands / free | 0.99 / 0.91 | 1.11 / 1.10 | 1.10 / 1.09 | 1.08 / 1.04 |
-
-Every request was served (36, 47 and 39 of them), and no vehicle found its parkingArea
-full (`unparked` 0). One seed alone carries the noise of one request stream: seed 0
-shows no cost, the other two about 10 %.
-"""
-
-
-#: Move-up on networks outside the report (their own commands), kept after the stands.
-OTHER_NETWORKS = """
-## Networks outside the report
-
-The same defaults on three networks the report does not cover: Bologna
-(`../shared/nets/bologna.net.xml.gz`, a city district), Bad Hersfeld imported from its
-OpenStreetMap extract (`routing-svc import-osm ../shared/nets/badhersfeld.osm.xml.gz -o
-bhosm.net.xml.gz`) and `bs3d` (the Braunschweig network of SUMO's game,
-`tools/game/bs3d`, `--net bs3d`), 3 seeds, 1 h of requests at 40/h, background 3
-vehicles/h/km, a history of 1,000, idle vehicles at the service's posts, measured with
-their own commands, not this report's runs. Bologna and the OSM import were measured on
-2026-12-04 (`bb926d4`) with the co-simulation's defaults; the rows marked (†) on
-2026-12-01 with the queue served oldest first (`--queue fifo` added to the command, the
-co-simulation's only order then), and not run again:
-
-```
-routing-svc cosim --net NET --mode MODE --vehicles N --hours 1 --rate 40 --density 3 \\
-    --seeds 0,1,2 --history 1000 --policies sa,optimum,sumo-stop --workers 1 --no-plots
-```
-
-| experiment | busy | `sa` mean / p90 (s) | `sumo-stop` | `optimum` | ratios |
-|---|---|---|---|---|---|
-| bologna persons 10 | 0.37 | 86 / 171 | 122 / 210 | 83 / 161 | 0.70, **0.82**, 1.04 |
-| bologna incidents 10 | 0.39 | 110 / 211 | 152 / 298 | 106 / 199 | 0.72, 0.71, 1.04 |
-| OSM persons 10 | 0.69 | 418 / 919 | 546 / 1,431 | 456 / 925 | 0.77, 0.64, 0.92 |
-| OSM incidents 10 | 0.69 | 431 / 1,491 | 502 / inf | 400 / 956 | **0.86**, 0, **1.08** |
-| OSM incidents 20 | 0.32 | 257 / inf | 333 / 1,675 | 269 / 937 | 0.77, **inf**, 0.95 |
-| bs3d rebuilt, persons 10 (†) | 0.24 | 45 / 81 | 84 / 150 | 51 / 88 | 0.54, 0.54, 0.88 |
-| bs3d rebuilt, incidents 10 (†) | 0.23 | 42 / 80 | 77 / 136 | 44 / 82 | 0.54, 0.59, 0.95 |
-| bs3d rebuilt, persons 20 (†) | 0.11 | 30 / 55 | 53 / 105 | 36 / 69 | 0.57, 0.52, 0.85 |
-| bs3d rebuilt, incidents 20 (†) | 0.11 | 33 / 63 | 48 / 78 | 29 / 53 | 0.68, **0.804**, **1.13** |
-| bs3d, persons 10 (†) | 0.68 | 358 / 840 | 273 / 834 | 383 / 849 | **1.31**, **1.01**, 0.93 |
-| bs3d, incidents 10 (†) | 0.79 | 827 / inf | 646 / inf | 881 / inf | **1.28**, **inf**, 0.94 |
-| bs3d, persons 20 (†) | 0.27 | 107 / 377 | 135 / 455 | 132 / 423 | 0.79, **0.83**, 0.81 |
-| bs3d, incidents 20 (†) | 0.40 | 428 / 1,134 | 463 / inf | 486 / 1,219 | **0.93**, 0, 0.88 |
-
-Ratios: mean / `sumo-stop` (goal 0.8), p90 / `sumo-stop` (0.8), mean / `optimum` (1.05);
-missed in bold; 0 where `sumo-stop`'s p90 is infinite. Means are over the served requests.
-`bs3d`: as SUMO ships it; `bs3d rebuilt`: its traffic-light programs rebuilt (below).
-- **Bologna and the OSM import.** `sa` meets 11 of the 15 checks. On the imported
-  network's incidents with 10 vehicles `sa` waits 1.08 times as long as `optimum`, with
-  11 of 41 requests a seed queued. A p90 is infinite when
-  a request of a seed was never served: on the imported network SUMO's background traffic
-  jams (93 of 1,858 background vehicles of one run waited more than 1,000 s), and a taxi
-  sent through such a jam does not reach its customer before the run ends. A dispatch is
-  never taken back once SUMO has accepted it.
-- **`bs3d` as shipped measures one junction, not the fleet.** Its one traffic light, at
-  the central junction, runs programs made for the game's player, who switches them by
-  hand: phases of 1,000 s, and 12 of its 16 links between car edges never turn green
-  (`routing-svc cosim --net bs3d` says so on standard error and in the summary's
-  `signals`). A vehicle that needs one of them waits at the line until SUMO teleports it
-  (after 300 s). The service prices free-flow travel times and puts posts on the
-  approaches to that junction: in one run (`optimum`, persons, 10 vehicles, seed 0) the
-  fleet stood 11,051 vehicle-seconds at its red lights with no vehicle ahead (SUMO's own
-  taxis in `sumo-stop`, idle where they dropped their customer: 8,472; counted by a step
-  hook through libsumo, not kept), and a customer whose taxi the service put 3 s away
-  waited 302 s. With the programs rebuilt by netconvert (the same edges; fixed-time
-  programs, the longest phase 42 s), `sa`'s mean waits fall from between 107 and
-  827 s to between 30 and 45 s, and
-  `sa` meets 10 of the 12 checks (6 of 12 as shipped). It misses the p90 of incidents with
-  20 vehicles by 0.004, and the mean against `optimum` there (1.13): in a run of an hour
-  no reference moves, and `sa` starts from the p-median of its 1,000-target history where
-  `optimum` starts from that of the 2,000-incident sample it is measured on (see above).
-
-  ```
-  netconvert -s "$(python -c 'import sumo; print(sumo.SUMO_HOME)')/tools/game/bs3d/bs.net.xml" \\
-      --tls.rebuild -o bs3d_signals.net.xml.gz
-  ```
-"""
-
-
-#: Current travel times pushed to the service (their own commands), kept last.
-TRAVEL_TIMES = """
-## With SUMO's current travel times
-
-`routing-svc cosim --traffic-costs N` pushes SUMO's current edge travel times to the
-service every `N` simulated seconds (`PUT .../traveltimes`), so that the dispatch, the posts
-and the learning price the current times; the report above prices free-flow times.
-Measured on 2026-12-06 (`efec672`) with the report's settings (`drt` with background
-traffic of 20 vehicles/h/km, Bad Hersfeld and `bs3d` as SUMO ships it with 3), 3 seeds,
-one command a row and form (`NET`: `drt`, `../shared/nets/badhersfeld.net.xml.gz`,
-`bs3d`); `sumo-stop` does not depend on the option:
-
-```
-routing-svc cosim --net NET --mode MODE --vehicles N --hours 1 --rate 40 --density D \\
-    --seeds 0,1,2 --history 1000 --policies sa,optimum,sumo-stop --workers 2 --no-plots \\
-    [--traffic-costs 60 | --traffic-costs 300]
-```
-
-| experiment | `sumo-stop` mean / p90 (s) | times | `sa` mean / p90 (s) | ratios |
-|---|---|---|---|---|
-| drt persons 10 | 95 / 159 | free-flow | 45 / 81 | 0.48, 0.51, 0.94 |
-| drt persons 10 | 95 / 159 | every 60 s | 46 / 83 | 0.48, 0.52, 0.99 |
-| drt persons 10 | 95 / 159 | every 300 s | 50 / 84 | 0.52, 0.53, **1.08** |
-| drt persons 20 | 75 / 126 | free-flow | 36 / 62 | 0.48, 0.49, 0.99 |
-| drt persons 20 | 75 / 126 | every 60 s | 36 / 63 | 0.47, 0.50, 0.98 |
-| drt persons 20 | 75 / 126 | every 300 s | 37 / 64 | 0.49, 0.51, 0.97 |
-| drt incidents 10 | 91 / 166 | free-flow | 63 / 111 | 0.70, 0.67, 0.98 |
-| drt incidents 10 | 91 / 166 | every 60 s | 62 / 115 | 0.69, 0.69, 0.90 |
-| drt incidents 10 | 91 / 166 | every 300 s | 59 / 103 | 0.65, 0.62, 0.92 |
-| drt incidents 20 | 65 / 111 | free-flow | 48 / 91 | 0.74, **0.81**, 0.98 |
-| drt incidents 20 | 65 / 111 | every 60 s | 47 / 85 | 0.72, 0.77, 0.97 |
-| drt incidents 20 | 65 / 111 | every 300 s | 48 / 87 | 0.73, 0.78, 0.98 |
-| badhersfeld persons 10 | 390 / 604 | free-flow | 304 / 480 | 0.78, 0.796, 0.99 |
-| badhersfeld persons 10 | 390 / 604 | every 60 s | 293 / 489 | 0.75, **0.81**, 1.01 |
-| badhersfeld persons 10 | 390 / 604 | every 300 s | 289 / 476 | 0.74, 0.79, 0.96 |
-| badhersfeld persons 20 | 215 / 359 | free-flow | 159 / 288 | 0.74, **0.802**, **1.07** |
-| badhersfeld persons 20 | 215 / 359 | every 60 s | 152 / 261 | 0.71, 0.73, 1.04 |
-| badhersfeld persons 20 | 215 / 359 | every 300 s | 156 / 277 | 0.72, 0.77, 1.04 |
-| badhersfeld incidents 10 | 356 / 613 | free-flow | 245 / 460 | 0.69, 0.75, 1.00 |
-| badhersfeld incidents 10 | 356 / 613 | every 60 s | 253 / 465 | 0.71, 0.76, **1.08** |
-| badhersfeld incidents 10 | 356 / 613 | every 300 s | 229 / 422 | 0.64, 0.69, **1.09** |
-| badhersfeld incidents 20 | 210 / 345 | free-flow | 129 / 232 | 0.61, 0.67, 0.94 |
-| badhersfeld incidents 20 | 210 / 345 | every 60 s | 134 / 263 | 0.64, 0.76, 0.99 |
-| badhersfeld incidents 20 | 210 / 345 | every 300 s | 130 / 239 | 0.62, 0.69, 0.98 |
-| bs3d persons 10 | 273 / 834 | free-flow | 312 / 784 | **1.14**, **0.94**, 0.89 |
-| bs3d persons 10 | 273 / 834 | every 60 s | 298 / 705 | **1.09**, **0.85**, 1.02 |
-| bs3d persons 10 | 273 / 834 | every 300 s | 280 / 645 | **1.03**, 0.77, 0.99 |
-| bs3d persons 20 | 135 / 455 | free-flow | 107 / 377 | 0.79, **0.83**, 0.81 |
-| bs3d persons 20 | 135 / 455 | every 60 s | 86 / 307 | 0.64, 0.67, 0.64 |
-| bs3d persons 20 | 135 / 455 | every 300 s | 120 / 310 | **0.89**, 0.68, 0.84 |
-| bs3d incidents 10 | 646 / inf | free-flow | 715 / inf | **1.11**, **inf**, 0.97 |
-| bs3d incidents 10 | 646 / inf | every 60 s | 603 / inf | **0.93**, **inf**, 0.96 |
-| bs3d incidents 10 | 646 / inf | every 300 s | 655 / inf | **1.01**, **inf**, 0.93 |
-| bs3d incidents 20 | 463 / inf | free-flow | 428 / 1,134 | **0.93**, 0.00, 0.88 |
-| bs3d incidents 20 | 463 / inf | every 60 s | 385 / 1,123 | **0.83**, 0.00, 0.73 |
-| bs3d incidents 20 | 463 / inf | every 300 s | 496 / 1,260 | **1.07**, 0.00, **1.12** |
-
-Ratios: mean / `sumo-stop` (goal 0.8), p90 / `sumo-stop` (0.8), mean / `optimum` with the
-same option (1.05); missed in bold; 0 where `sumo-stop`'s p90 is infinite. The free-flow
-rows of `drt` and Bad Hersfeld are the report's runs again, to the digit.
-
-- **On the report's networks the option changes `sa`'s waits within the noise of three
-  seeds.** `sa` meets 11, 12 and 11 of `drt`'s 12 checks (free-flow, every 60 s, every
-  300 s) and 10, 10 and 11 of Bad Hersfeld's 12; its mean waits are 0.99 and 1.00 times
-  the free-flow ones every 60 s (mean of the four experiments) and 1.01 and 0.97 every
-  300 s. Each form meets some checks the others miss, by 0.002 to 0.04 in a ratio.
-- **On `bs3d` as shipped current times help every 60 s** (mean waits 0.88 times the
-  free-flow ones, 7 of 12 checks against 6): the times of the approaches to its junction
-  that never turns green rise, and the posts and the dispatch avoid them. Every 300 s
-  the times are older than most waits there (1.03 times, 6 of 12).
-- So the report keeps free-flow times: it changes no default.
-"""
+#: Sections measured with their own commands, appended after the report's runs, in order.
+MEASURED_SECTIONS = (
+    ROOT / "bench" / "cosim_sections" / "stands.md",
+    ROOT / "bench" / "cosim_sections" / "other_networks.md",
+    ROOT / "bench" / "cosim_sections" / "travel_times.md",
+)
 
 
 def render(
@@ -675,7 +500,8 @@ def render(
         "## Results",
         "",
     ]
-    return text + "\n".join(summary + sections) + STANDS + OTHER_NETWORKS + TRAVEL_TIMES
+    measured = "".join("\n" + path.read_text(encoding="utf-8") for path in MEASURED_SECTIONS)
+    return text + "\n".join(summary + sections) + measured
 
 
 def _saved_runs(out_dir: Path) -> tuple[dict[str, Any], list[PolicyRun]] | None:

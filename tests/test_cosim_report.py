@@ -57,3 +57,15 @@ def test_a_missed_optimum_goal_says_where_the_references_stand() -> None:
     assert report._where_references_stand(met, report.goal_checks(met), 1000) == []
     unknown = {"sa": _row(159.0, 6.0, math.nan), "optimum": _row(149.0, 9.0, 57.6)}
     assert report._where_references_stand(unknown, report.goal_checks(unknown), 1000) == []
+
+
+def test_the_report_ends_with_the_sections_measured_by_their_own_commands() -> None:
+    report = _report_module()
+    names = [path.name for path in report.MEASURED_SECTIONS]
+    assert names == ["stands.md", "other_networks.md", "travel_times.md"]
+    sections = [path.read_text(encoding="utf-8") for path in report.MEASURED_SECTIONS]
+    assert [text.splitlines()[0] for text in sections] == [
+        "## Stands", "## Networks outside the report", "## With SUMO's current travel times",
+    ]  # fmt: skip
+    document = (ROOT / "docs" / "cosim.md").read_text(encoding="utf-8")
+    assert document.endswith("".join("\n" + text for text in sections))
