@@ -1,8 +1,8 @@
 """A fleet that starts at the p-median of a history.
 
 The fleet is created through the service's own optimum start (``start.optimum``
-of ``POST /v1/fleets``: :func:`routing_svc.service.reference.optimum_start`
-solves the p-median of the sample, :func:`routing_svc.sa.prior_counts` counts
+of ``POST /v1/fleets``: :mod:`routing_svc.service.creation` solves the p-median
+of the sample's empirical distribution, :func:`routing_svc.sa.prior_counts` counts
 the sample's targets toward each vehicle's step counter), as ``simulate
 --start prior:N`` starts. The sample is the history's calls in time order,
 thinned evenly to the route's limit when there are more.

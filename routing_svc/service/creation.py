@@ -13,8 +13,6 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any
 
-import numpy as np
-
 from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput
 from routing_svc.network.stands import Stand, stands_on_network
@@ -27,8 +25,8 @@ from routing_svc.service.reference import (
     build_demand,
     check_mix,
     describe_spec,
-    optimum_start,
     reference_optimum,
+    solve_reference,
 )
 from routing_svc.service.schemas import FleetSpec, StandSpec
 from routing_svc.types import NetPosition
@@ -53,17 +51,13 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
     stands = None if spec.stands is None else build_stands(spec.stands, entry, vehicles=n)
     if spec.start is not None:
         sample = [entry.resolve(p) for p in spec.start.optimum.sample]
-        positions: list[NetPosition] = (
-            optimum_start(entry, cost=spec.cost, sample=sample, vehicles=n, power=objective.power)
-            if stands is None
-            else solve_stands(
-                space,
-                DemandDistribution.from_masses("prior-sample", tuple(sample), np.ones(len(sample))),
-                n,
-                stands,
-                power=objective.power,
-            ).positions
-        )
+        prior = DemandDistribution.of_targets("prior-sample", sample)
+        if stands is None:
+            positions, _ = solve_reference(
+                entry, cost=spec.cost, demand=prior, vehicles=n, power=objective.power
+            )
+        else:
+            positions = solve_stands(space, prior, n, stands, power=objective.power).positions
         # deterministic pairing: vehicles in id order take the sites in edge order
         positions.sort()
         ordered = sorted(spec.vehicles, key=lambda v: v.id)

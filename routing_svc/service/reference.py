@@ -148,15 +148,6 @@ def reference_optimum(
     }
 
 
-def optimum_start(
-    entry: NetworkEntry, *, cost: str, sample: Sequence[NetPosition], vehicles: int, power: float
-) -> list[NetPosition]:
-    """Starting positions at the p-median of a prior demand sample (equal weights)."""
-    demand = DemandDistribution.from_masses("prior-sample", tuple(sample), np.ones(len(sample)))
-    positions, _ = solve_reference(entry, cost=cost, demand=demand, vehicles=vehicles, power=power)
-    return positions
-
-
 def expected_cost_now(runtime: ReferencedFleet) -> float:
     """Exact expected cost of the fleet's current positions under its reference demand
     (of its stands, where a fleet with stands waits)."""

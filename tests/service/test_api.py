@@ -10,6 +10,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from routing_svc.network import RoadSpace
+from routing_svc.offline_run import network_scenario, starting_positions
 from routing_svc.types import NetPosition
 from tests.helpers import DRT, NET, edge, fleet_body
 
@@ -286,6 +287,32 @@ def test_an_optimum_start_counts_the_sample_in_the_step_sizes(client: TestClient
     for v, k in zip(fleet["vehicles"], counts, strict=True):
         assert steps[v["id"]] == pytest.approx(a / (k + 1) ** power)
     assert all(v["updates"] == 0 for v in fleet["vehicles"])
+
+
+def test_an_optimum_start_is_where_simulate_starts_from_the_same_sample(
+    client: TestClient,
+) -> None:
+    # a sample that repeats its places, as a call history does: the service and
+    # ``simulate --start prior:N`` solve the p-median of one empirical distribution
+    rng = np.random.default_rng(31)
+    places = [NetPosition(int(e), 0.0) for e in rng.choice(NET.n_edges, size=25, replace=False)]
+    sample = [places[int(i)] for i in rng.integers(len(places), size=200)]
+    body = fleet_body(
+        vehicles=[{"id": f"v{i}"} for i in range(6)],
+        start={"optimum": {"sample": [{"edge": edge(p.edge), "offset": 0.0} for p in sample]}},
+    )
+    fleet = client.post("/v1/fleets", json=body)
+    assert fleet.status_code == 201, fleet.text
+    served = sorted(
+        NetPosition(NET.edge_index[v["position"]["edge"]], v["position"]["offset"])
+        for v in fleet.json()["vehicles"]
+    )
+    scenario = network_scenario(
+        "drt", demand="hotspots:3", vehicles=6, cost="length", rng=np.random.default_rng(0)
+    )
+    simulated, used = starting_positions(scenario, sample, start="prior:200", power=1.0)
+    assert used == 200
+    assert served == sorted(simulated)
 
 
 def test_the_answers_say_every_vehicle_that_moved(client: TestClient) -> None:
