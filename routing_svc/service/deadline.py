@@ -12,12 +12,17 @@ middleware answers shortly after: a read with ``StorageTimeout``, a write with
 
 Network uploads (parsing is CPU work, bounded by the upload limit) and the
 event stream (open by design) have no deadline; their waits on the store are
-bounded by the store's own timeouts.
+bounded by the store's own timeouts. For the same reason a route pauses its
+deadline while it solves (:func:`deadline_paused`: a fleet's optimum, bounded by
+its network and candidate sites): the deadline moves on by the time solved, so
+it still bounds every wait on the store before and after.
 """
 
 from __future__ import annotations
 
 import asyncio
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from contextvars import ContextVar
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -26,17 +31,37 @@ from routing_svc.errors import CommitOutcomeUnknown, StorageError, StorageTimeou
 from routing_svc.service.guards import READ_METHODS
 from routing_svc.service.problems import error_problem
 
-__all__ = ["GRACE_S", "RequestDeadline", "request_deadline"]
+__all__ = ["GRACE_S", "RequestDeadline", "deadline_paused", "request_deadline"]
 
 GRACE_S = 0.05
 """How long after the deadline the middleware answers for a route that did not."""
 
 _DEADLINE: ContextVar[float | None] = ContextVar("routing_svc_request_deadline", default=None)
+_BOUND: ContextVar[asyncio.Timeout | None] = ContextVar("routing_svc_request_bound", default=None)
 
 
 def request_deadline() -> float | None:
     """The current request's deadline (event-loop time), ``None`` outside one."""
     return _DEADLINE.get()
+
+
+@asynccontextmanager
+async def deadline_paused() -> AsyncIterator[None]:
+    """Stop the current request's deadline while the block runs, then move it on by
+    the time the block took (nothing outside a request)."""
+    deadline, bound = _DEADLINE.get(), _BOUND.get()
+    if deadline is None or bound is None:
+        yield
+        return
+    loop = asyncio.get_running_loop()
+    started = loop.time()
+    bound.reschedule(None)
+    try:
+        yield
+    finally:
+        moved = deadline + (loop.time() - started)
+        _DEADLINE.set(moved)
+        bound.reschedule(moved + GRACE_S)
 
 
 def _exempt(scope: Scope) -> bool:
@@ -76,6 +101,7 @@ class RequestDeadline:
             await send(message)
 
         bound = asyncio.timeout_at(deadline + GRACE_S)
+        bound_token = _BOUND.set(bound)
         try:
             async with bound:
                 await self.app(scope, receive, tracked)
@@ -91,4 +117,5 @@ class RequestDeadline:
                 )
             await error_problem(error, retry_after=self.retry_after_s)(scope, receive, send)
         finally:
+            _BOUND.reset(bound_token)
             _DEADLINE.reset(token)

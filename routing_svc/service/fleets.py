@@ -195,7 +195,12 @@ class FleetService:
 
     def create_fleet(self, spec: FleetSpec) -> dict[str, Any]:
         entry = self.network(spec.network)
-        created = build_created_payload(spec, entry)
+        return self.commit_fleet(spec, entry, build_created_payload(spec, entry))
+
+    def commit_fleet(
+        self, spec: FleetSpec, entry: NetworkEntry, created: dict[str, Any]
+    ) -> dict[str, Any]:
+        """Store a fleet whose creation payload (:func:`build_created_payload`) is solved."""
         runtime = FleetRuntime(
             spec.id, entry, created, recent_window=self.recent_window, solver=self.solver
         )

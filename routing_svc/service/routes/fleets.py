@@ -8,6 +8,8 @@ from fastapi import APIRouter, Depends, Query, Response
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
+from routing_svc.service.creation import build_created_payload
+from routing_svc.service.deadline import deadline_paused
 from routing_svc.service.deps import fleet_service
 from routing_svc.service.fleets import FleetService
 from routing_svc.service.responses import (
@@ -41,8 +43,14 @@ Service = Annotated[FleetService, Depends(fleet_service)]
     response_model_exclude_unset=True,
 )
 async def create_fleet(spec: FleetSpec, service: Service) -> dict[str, Any]:
-    """Create a fleet on a network (explicit positions or the optimum of a prior sample)."""
-    return await run_in_threadpool(service.create_fleet, spec)
+    """Create a fleet on a network (explicit positions or the optimum of a prior sample).
+
+    The request's deadline bounds its waits on the store, not the solving of the start
+    and the reference optimum."""
+    entry = await run_in_threadpool(service.network, spec.network)
+    async with deadline_paused():
+        created = await run_in_threadpool(build_created_payload, spec, entry)
+    return await run_in_threadpool(service.commit_fleet, spec, entry, created)
 
 
 @router.get("", response_model=FleetList, response_model_exclude_unset=True)
