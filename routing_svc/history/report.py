@@ -49,12 +49,7 @@ def history_demand(targets: Sequence[NetPosition]) -> DemandDistribution[NetPosi
     if len(set(chosen)) > MAX_ATOMS:
         keep = np.linspace(0, len(chosen) - 1, MAX_ATOMS).round().astype(np.int64)
         chosen = [chosen[int(i)] for i in keep]
-    counts: dict[NetPosition, int] = {}
-    for p in chosen:
-        counts[p] = counts.get(p, 0) + 1
-    return DemandDistribution.from_masses(
-        "history", tuple(counts), np.asarray(list(counts.values()), dtype=np.float64)
-    )
+    return DemandDistribution.of_targets("history", chosen)
 
 
 def objective_power(fleet: dict[str, Any]) -> float:

@@ -93,11 +93,12 @@ def fleet_vehicles(
 def empirical_demand(
     network: CompiledNetwork, requests: Sequence[Request]
 ) -> DemandDistribution[NetPosition]:
-    """The realised requests as a distribution (one atom each, equal weights)."""
+    """The realised requests as a distribution: each place weighted by how many
+    requests it had."""
     if not requests:
         raise InvalidInput("no requests to build a distribution from")
     atoms = [NetPosition(network.edge_index[r.edge], float(r.offset)) for r in requests]
-    return DemandDistribution.from_masses("realised", atoms, np.ones(len(atoms)))
+    return DemandDistribution.of_targets("realised", atoms)
 
 
 def mixed_demand(phases: Sequence[Phase], *, end: float) -> DemandDistribution[NetPosition]:
