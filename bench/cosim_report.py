@@ -38,7 +38,7 @@ import numpy as np
 from routing_svc.sim import CosimResult, CosimSpec, PolicyRun, parse_policies, run_cosim
 from routing_svc.sim.command import parse_seeds
 from routing_svc.sim.measures import DEFAULT_THRESHOLDS
-from routing_svc.sim.plots import write_figures
+from routing_svc.sim.plots import FIGURE_KINDS, figure_path, write_figures
 from routing_svc.sim.spec import DEFAULT_INCIDENT_SAMPLE
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -504,6 +504,12 @@ def render(
     return text + "\n".join(summary + sections) + measured
 
 
+def drawn_figures(key: str) -> dict[str, Path]:
+    """The figures a full run drew for experiment ``key`` that are still in ``FIGURES``."""
+    paths = {kind: figure_path(FIGURES, key, kind) for kind in FIGURE_KINDS}
+    return {kind: path for kind, path in paths.items() if path.is_file()}
+
+
 def _saved_runs(out_dir: Path) -> tuple[dict[str, Any], list[PolicyRun]] | None:
     """The summary and runs an earlier report saved in ``out_dir`` (``None``: not finished)."""
     summary, runs = out_dir / "summary.json", out_dir / "runs.json"
@@ -568,6 +574,7 @@ def main(argv: list[str] | None = None) -> int:
     sections: list[str] = []
     report: dict[str, Any] = {}
     all_figures: dict[str, dict[str, dict[str, Any]]] = {}
+    drawn = False  # whether any experiment's figures are shown
     started = time.perf_counter()
     for experiment in chosen:
         t0 = time.perf_counter()
@@ -580,7 +587,7 @@ def main(argv: list[str] | None = None) -> int:
             by_policy: dict[str, list[PolicyRun]] = {}
             for run in saved[1]:
                 by_policy.setdefault(run.policy, []).append(run)
-            summary, pictures = saved[0], {}
+            summary, pictures = saved[0], drawn_figures(experiment.key)
         else:
             print(f"[cosim report] {experiment.key} ...", file=sys.stderr, flush=True)
             result: CosimResult = run_cosim(
@@ -601,6 +608,7 @@ def main(argv: list[str] | None = None) -> int:
             expected = summary["policies"].get(name, {}).get("final_expected_wait_s")
             row["expected_wait_s"] = math.nan if expected is None else float(expected)
         sections += section(experiment, figures, pictures)
+        drawn = drawn or bool(pictures)
         all_figures[experiment.key] = figures
         report[experiment.key] = {
             **summary,
@@ -633,7 +641,7 @@ def main(argv: list[str] | None = None) -> int:
         history=args.history,
         rule=args.rule,
         left_out=left_out,
-        pictures=not (args.no_figures or args.render_only),
+        pictures=drawn,
     )
     (ROOT / "docs" / "cosim.md").write_text(text, encoding="utf-8")
     print(

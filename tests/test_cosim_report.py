@@ -69,3 +69,14 @@ def test_the_report_ends_with_the_sections_measured_by_their_own_commands() -> N
     ]  # fmt: skip
     document = (ROOT / "docs" / "cosim.md").read_text(encoding="utf-8")
     assert document.endswith("".join("\n" + text for text in sections))
+
+
+def test_the_report_from_saved_runs_shows_the_figures_the_full_run_drew() -> None:
+    report = _report_module()
+    drawn = report.drawn_figures("drt-persons-10")
+    assert list(drawn) == ["waits", "positions", "objective"]
+    assert all(path.is_file() and path.parent == report.FIGURES for path in drawn.values())
+    assert report.drawn_figures("no-such-experiment") == {}
+    document = (ROOT / "docs" / "cosim.md").read_text(encoding="utf-8")
+    for kind, path in drawn.items():  # as the report links them
+        assert f"![drt-persons-10 {kind}]({path.relative_to(ROOT / 'docs').as_posix()})" in document

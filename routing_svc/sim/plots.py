@@ -203,6 +203,15 @@ def plot_objective(
     return path
 
 
+FIGURE_KINDS = ("waits", "positions", "objective")
+"""The figures :func:`write_figures` draws, in the order a report shows them."""
+
+
+def figure_path(out_dir: Path, prefix: str, kind: str) -> Path:
+    """Where :func:`write_figures` puts the figure ``kind`` of ``prefix``."""
+    return out_dir / f"{prefix}-{kind}.png"
+
+
 def write_figures(result: CosimResult, *, out_dir: Path, prefix: str) -> dict[str, Path]:
     """Waits over the run, positions on the network, SA objective over time.
 
@@ -220,7 +229,9 @@ def write_figures(result: CosimResult, *, out_dir: Path, prefix: str) -> dict[st
     label = f"{Path(spec.network).name.split('.')[0]}, {spec.mode}, {spec.vehicles} vehicles"
     paths = {
         "waits": plot_waits(
-            result, out_dir / f"{prefix}-waits.png", title=f"SUMO-measured wait ({label})"
+            result,
+            figure_path(out_dir, prefix, "waits"),
+            title=f"SUMO-measured wait ({label})",
         )
     }
     if not result.curves:
@@ -235,13 +246,13 @@ def write_figures(result: CosimResult, *, out_dir: Path, prefix: str) -> dict[st
         result,
         prepared.space,
         demand,
-        out_dir / f"{prefix}-positions.png",
+        figure_path(out_dir, prefix, "positions"),
         title=f"{policy}: start (o) -> end of the run (filled), optimum (star); {label}",
         policy=policy,
     )
     paths["objective"] = plot_objective(
         result,
-        out_dir / f"{prefix}-objective.png",
+        figure_path(out_dir, prefix, "objective"),
         title=f"SA objective vs optimum ({label})",
         shift_at=spec.shift_at,
     )
