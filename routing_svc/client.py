@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, Self
 
 import httpx
 
@@ -87,16 +87,38 @@ class HttpFleetClient:
 
     def __init__(self, base_url: str, *, api_key: str | None = None, timeout: float = 30.0) -> None:
         headers = {"X-API-Key": api_key} if api_key else {}
-        self._http = httpx.Client(base_url=base_url.rstrip("/"), headers=headers, timeout=timeout)
+        self._base_url = base_url.rstrip("/")
+        self._timeout = timeout
+        self._http = httpx.Client(base_url=self._base_url, headers=headers, timeout=timeout)
 
     def close(self) -> None:
         self._http.close()
 
-    def __enter__(self) -> HttpFleetClient:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    def _send(self, method: str, path: str, **request: Any) -> httpx.Response:
+        """One request; a transport failure becomes :class:`errors.ServiceUnreachable`.
+
+        A write whose answer was lost (broken connection, timeout) may have been
+        applied: the message says so, and a retry with the same idempotency key
+        settles it."""
+        where = f"{method} {self._base_url}{path}"
+        try:
+            return self._http.request(method, path, **request)
+        except httpx.ConnectError as exc:
+            raise errors.ServiceUnreachable(f"cannot connect for {where}: {exc}") from exc
+        except httpx.TransportError as exc:
+            lost = (
+                f"no answer within {self._timeout:g} s"
+                if isinstance(exc, httpx.TimeoutException)
+                else f"the connection broke ({exc.__class__.__name__}: {exc})"
+            )
+            maybe = "" if method == "GET" else "; the request may have been applied"
+            raise errors.ServiceUnreachable(f"{where}: {lost}{maybe}") from exc
 
     def _json(self, response: httpx.Response) -> dict[str, Any]:
         _raise_for_problem(response)
@@ -106,17 +128,17 @@ class HttpFleetClient:
     def add_network(self, path: Path, *, name: str | None = None) -> dict[str, Any]:
         params = {"name": name} if name else {}
         return self._json(
-            self._http.post("/v1/networks", params=params, content=Path(path).read_bytes())
+            self._send("POST", "/v1/networks", params=params, content=Path(path).read_bytes())
         )
 
     def create_fleet(self, spec: Mapping[str, Any]) -> dict[str, Any]:
-        return self._json(self._http.post("/v1/fleets", json=dict(spec)))
+        return self._json(self._send("POST", "/v1/fleets", json=dict(spec)))
 
     def get_fleet(self, fleet_id: str) -> dict[str, Any]:
-        return self._json(self._http.get(f"/v1/fleets/{fleet_id}"))
+        return self._json(self._send("GET", f"/v1/fleets/{fleet_id}"))
 
     def delete_fleet(self, fleet_id: str) -> None:
-        _raise_for_problem(self._http.delete(f"/v1/fleets/{fleet_id}"))
+        _raise_for_problem(self._send("DELETE", f"/v1/fleets/{fleet_id}"))
 
     def post_target(
         self,
@@ -129,7 +151,7 @@ class HttpFleetClient:
         headers = {"Idempotency-Key": idempotency_key} if idempotency_key else {}
         body = {"position": dict(position), "requires": list(requires) if requires else None}
         return self._json(
-            self._http.post(f"/v1/fleets/{fleet_id}/targets", json=body, headers=headers)
+            self._send("POST", f"/v1/fleets/{fleet_id}/targets", json=body, headers=headers)
         )
 
     def assign(
@@ -140,11 +162,11 @@ class HttpFleetClient:
         requires: Sequence[str] | None = None,
     ) -> dict[str, Any]:
         body = {"position": dict(position), "requires": list(requires) if requires else None}
-        return self._json(self._http.post(f"/v1/fleets/{fleet_id}/assign", json=body))
+        return self._json(self._send("POST", f"/v1/fleets/{fleet_id}/assign", json=body))
 
     def put_traveltimes(self, fleet_id: str, times: Mapping[str, float]) -> dict[str, Any]:
         return self._json(
-            self._http.put(f"/v1/fleets/{fleet_id}/traveltimes", json={"times": dict(times)})
+            self._send("PUT", f"/v1/fleets/{fleet_id}/traveltimes", json={"times": dict(times)})
         )
 
     def put_vehicle_state(
@@ -153,7 +175,7 @@ class HttpFleetClient:
         """``PUT .../vehicles/{vehicle}/state`` with ``state`` (``status``, optionally
         ``position`` and ``timestamp``)."""
         return self._json(
-            self._http.put(f"/v1/fleets/{fleet_id}/vehicles/{vehicle}/state", json=dict(state))
+            self._send("PUT", f"/v1/fleets/{fleet_id}/vehicles/{vehicle}/state", json=dict(state))
         )
 
     def put_vehicle_states(
@@ -161,11 +183,13 @@ class HttpFleetClient:
     ) -> dict[str, Any]:
         """``POST .../vehicles/state:batch``: each state names its ``vehicle``; all or none."""
         body = {"changes": [dict(s) for s in states]}
-        return self._json(self._http.post(f"/v1/fleets/{fleet_id}/vehicles/state:batch", json=body))
+        return self._json(
+            self._send("POST", f"/v1/fleets/{fleet_id}/vehicles/state:batch", json=body)
+        )
 
     def metrics(self, fleet_id: str) -> dict[str, Any]:
-        return self._json(self._http.get(f"/v1/fleets/{fleet_id}/metrics"))
+        return self._json(self._send("GET", f"/v1/fleets/{fleet_id}/metrics"))
 
     def posts(self, fleet_id: str) -> dict[str, Any]:
         """``GET .../posts``: where each available vehicle should wait now."""
-        return self._json(self._http.get(f"/v1/fleets/{fleet_id}/posts"))
+        return self._json(self._send("GET", f"/v1/fleets/{fleet_id}/posts"))

@@ -20,7 +20,8 @@
     │   │                       settings, unreachable, full, a driver error)
     │   ├── StorageTimeout      a wait on the store passed its bound; nothing was written
     │   └── CommitOutcomeUnknown  a write may or may not have committed
-    └── ReplayMismatch          a replay of the event log disagrees with the stored state
+    ├── ReplayMismatch          a replay of the event log disagrees with the stored state
+    └── ServiceUnreachable      a client's request got no answer (refused, broken, timed out)
 
 Every layer raises these; the service maps each class to one HTTP status in one place.
 """
@@ -125,10 +126,18 @@ class StorageTimeout(StorageError):
 class CommitOutcomeUnknown(StorageError):
     """The connection was lost, or the request's deadline passed, while a write was
     being committed: it may have been. A retry with the same ``Idempotency-Key``
-    settles it (applied once, or answered from the log)."""
+    settles it (applied once, or answered from the log); a fleet's creation, which
+    takes no key, is settled by its id (created now, or a conflict)."""
 
     title = "Commit outcome unknown"
 
 
 class ReplayMismatch(RoutingSvcError):
     title = "Replay mismatch"
+
+
+class ServiceUnreachable(RoutingSvcError):
+    """Raised by the HTTP client (:class:`routing_svc.client.HttpFleetClient`), never by
+    the service: the connection was refused or broke, or no answer came in time."""
+
+    title = "Service unreachable"

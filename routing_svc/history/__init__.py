@@ -14,6 +14,7 @@ from routing_svc.history.calls import BadRow, CallTable, read_calls
 from routing_svc.history.creation import history_fleet_spec
 from routing_svc.history.places import PlacedCalls, place_locally, place_remotely
 from routing_svc.history.replay import (
+    HistoryInterrupted,
     HistoryRefused,
     HttpHistoryClient,
     ImportResult,
@@ -24,6 +25,7 @@ from routing_svc.history.replay import (
 __all__ = [
     "BadRow",
     "CallTable",
+    "HistoryInterrupted",
     "HistoryRefused",
     "HttpHistoryClient",
     "ImportResult",

@@ -27,7 +27,7 @@ import orjson
 from tqdm import tqdm
 
 from routing_svc.client import FleetClient, HttpFleetClient
-from routing_svc.errors import InvalidInput
+from routing_svc.errors import InvalidInput, RoutingSvcError
 from routing_svc.history.calls import BadRow, CallTable
 from routing_svc.history.places import PlacedCalls
 from routing_svc.long_lived import frozen_heap
@@ -130,7 +130,8 @@ class HttpHistoryClient(HttpFleetClient):
         self, fleet_id: str, targets: list[dict[str, Any]], *, idempotency_key: str
     ) -> tuple[list[dict[str, Any]], int]:
         answer = self._json(
-            self._http.post(
+            self._send(
+                "POST",
                 f"/v1/fleets/{fleet_id}/targets:batch",
                 json={"targets": targets},
                 headers={"Idempotency-Key": idempotency_key},
@@ -148,8 +149,10 @@ class HttpHistoryClient(HttpFleetClient):
         """``POST /v1/networks/{id}/positions:resolve``: each position on the network, or
         why not."""
         return self._json(
-            self._http.post(
-                f"/v1/networks/{network_id}/positions:resolve", json={"positions": positions}
+            self._send(
+                "POST",
+                f"/v1/networks/{network_id}/positions:resolve",
+                json={"positions": positions},
             )
         )
 
@@ -162,6 +165,23 @@ class HistoryRefused(InvalidInput):
         more = f"; ... ({len(bad) - 20} more)" if len(bad) > 20 else ""
         super().__init__(f"{len(bad)} bad row(s), nothing was imported: {shown}{more}")
         self.bad = list(bad)
+
+
+class HistoryInterrupted(RoutingSvcError):
+    """A chunk failed part-way through a replay; the chunks before it are applied.
+
+    Each chunk carries its key (:func:`chunk_key`), so the same command again applies
+    every call once."""
+
+    title = "Import interrupted"
+
+    def __init__(self, index: int, chunks: int, cause: RoutingSvcError) -> None:
+        done = "no chunk is" if index == 0 else f"chunks 1 to {index} are"
+        super().__init__(
+            f"chunk {index + 1} of {chunks} failed ({cause.title.lower()}: {cause.detail}); "
+            f"{done} applied, and the same command again applies each call once"
+        )
+        self.cause = cause
 
 
 @dataclass
@@ -282,7 +302,10 @@ def replay_history(
                 [table.requires[r] for r in placed.rows[part].tolist()],
             )
             key = chunk_key(table.sha256, chunk_size, index)
-            answer = client.post_chunk(fleet_id, chunk, idempotency_key=key)
+            try:
+                answer = client.post_chunk(fleet_id, chunk, idempotency_key=key)
+            except RoutingSvcError as exc:
+                raise HistoryInterrupted(index, chunks, exc) from exc
             version = answer.version
             costs[index * chunk_size : index * chunk_size + len(answer.costs)] = answer.costs
             if answer.first_seq > int(before["version"]):

@@ -9,7 +9,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -85,16 +85,20 @@ def cli(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedPr
     )  # fmt: skip
 
 
-@pytest.fixture
-def live_server(tmp_path: Path) -> Iterator[Callable[[], str]]:
-    """``start()`` runs ``routing-svc serve`` (uvicorn) on a fresh SQLite file; its URL."""
-    processes: list[subprocess.Popen[bytes]] = []
+class LiveServers:
+    """``routing-svc serve`` (uvicorn) processes on one SQLite file: calling the object
+    starts one and answers its URL; :meth:`kill` ends the newest with SIGKILL."""
 
-    def start() -> str:
+    def __init__(self, tmp_path: Path) -> None:
+        self.tmp_path = tmp_path
+        self.processes: list[subprocess.Popen[bytes]] = []
+
+    def __call__(self) -> str:
         with socket.socket() as s:
             s.bind(("127.0.0.1", 0))
             port = s.getsockname()[1]
         url = f"http://127.0.0.1:{port}"
+        tmp_path = self.tmp_path
         cmd = [
             sys.executable, "-m", "routing_svc.cli", "serve", "--port", str(port),
             "--net", f"drt={DRT}", "--no-demo", "--db", str(tmp_path / "server.db"),
@@ -104,7 +108,7 @@ def live_server(tmp_path: Path) -> Iterator[Callable[[], str]]:
             process = subprocess.Popen(
                 cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
             )
-        processes.append(process)
+        self.processes.append(process)
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
             assert process.poll() is None, (tmp_path / "server.log").read_text()
@@ -116,7 +120,20 @@ def live_server(tmp_path: Path) -> Iterator[Callable[[], str]]:
             time.sleep(0.1)
         raise RuntimeError("the server did not start")
 
-    yield start
-    for process in processes:
-        process.terminate()
+    def kill(self) -> None:
+        process = self.processes[-1]
+        process.kill()
         process.wait(timeout=30)
+
+    def stop_all(self) -> None:
+        for process in self.processes:
+            process.terminate()
+            process.wait(timeout=30)
+
+
+@pytest.fixture
+def live_server(tmp_path: Path) -> Iterator[LiveServers]:
+    """Start ``routing-svc serve`` on a fresh SQLite file (:class:`LiveServers`)."""
+    servers = LiveServers(tmp_path)
+    yield servers
+    servers.stop_all()
