@@ -399,13 +399,23 @@ class NetworkAnswer(Answer):
 
     id: str
     name: str
-    junctions: int
-    edges: int
-    usable_edges: int
-    dropped_edges: int
-    bounds: list[Number] = Field(min_length=4, max_length=4)
-    has_projection: bool
-    sha256: str
+    junctions: int = Field(description="Junctions of the compiled network.")
+    edges: int = Field(
+        description="Edges of the compiled network: the largest strongly connected part of "
+        "the usable edges, where every edge reaches every other."
+    )
+    usable_edges: int = Field(
+        description="Non-internal edges of the file open to the vehicle class (``vclass``)."
+    )
+    dropped_edges: int = Field(
+        description="``usable_edges - edges``: usable edges outside the largest strongly "
+        "connected part, left out of the compiled network."
+    )
+    bounds: list[Number] = Field(
+        min_length=4, max_length=4, description="``[xmin, ymin, xmax, ymax]`` in metres."
+    )
+    has_projection: bool = Field(description="Whether positions may be given as lon/lat.")
+    sha256: str = Field(description="SHA-256 of the network file as read.")
     vclass: str
 
 
