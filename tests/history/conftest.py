@@ -55,6 +55,13 @@ def write_csv(path: Path, header: Sequence[str], rows: Sequence[Sequence[object]
     return path
 
 
+def write_edge_calls(path: Path, calls: Sequence[dict[str, Any]]) -> Path:
+    """``calls`` (of :func:`random_calls`) as a ``time,edge,offset`` CSV file."""
+    return write_csv(
+        path, ["time", "edge", "offset"], [[c["time"], c["edge"], c["offset"]] for c in calls]
+    )
+
+
 @pytest.fixture
 def client(tmp_path: Path) -> Iterator[InProcessHistoryClient]:
     """An in-process client on a fresh SQLite event log, with the DRT network."""

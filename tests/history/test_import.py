@@ -23,7 +23,14 @@ from routing_svc.history.replay import CallChunk, chunk_key
 from routing_svc.network import CompiledNetwork
 from routing_svc.network.snapping import point_on_edge
 from routing_svc.service.schemas import MAX_EDGE_ID, TargetSpec
-from tests.history.conftest import DRT, cli, fleet_at, random_calls, write_csv
+from tests.history.conftest import (
+    DRT,
+    cli,
+    fleet_at,
+    random_calls,
+    write_csv,
+    write_edge_calls,
+)
 
 
 def _import(client: InProcessHistoryClient, path: Path, fleet: str, **options: object):  # type: ignore[no-untyped-def]
@@ -198,11 +205,7 @@ def test_a_rerun_after_a_crash_applies_each_chunk_once(
     tmp_path: Path, client: InProcessHistoryClient, drt: CompiledNetwork
 ) -> None:
     calls = random_calls(drt, 50, seed=4)
-    path = write_csv(
-        tmp_path / "calls.csv",
-        ["time", "edge", "offset"],
-        [[c["time"], c["edge"], c["offset"]] for c in calls],
-    )
+    path = write_edge_calls(tmp_path / "calls.csv", calls)
     client.create_fleet(fleet_at([(calls[0]["edge"], 0.0), (calls[1]["edge"], 0.0)]))
     # the first chunk went through before the crash
     table = read_calls(path)
@@ -249,11 +252,7 @@ def test_an_import_whose_consolidations_a_worker_solves_applies_each_call_once_a
     tmp_path: Path, drt: CompiledNetwork
 ) -> None:
     calls = random_calls(drt, 2_000, seed=5)
-    path = write_csv(
-        tmp_path / "calls.csv",
-        ["time", "edge", "offset"],
-        [[c["time"], c["edge"], c["offset"]] for c in calls],
-    )
+    path = write_edge_calls(tmp_path / "calls.csv", calls)
     with InProcessHistoryClient(
         database_url=f"sqlite:///{tmp_path / 'e.db'}", consolidation_workers=1
     ) as client:

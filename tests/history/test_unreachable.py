@@ -16,7 +16,7 @@ from routing_svc.history import HistoryInterrupted, HttpHistoryClient, read_call
 from routing_svc.history.places import place_remotely
 from routing_svc.history.replay import CallChunk, ChunkAnswer
 from routing_svc.network import CompiledNetwork
-from tests.history.conftest import LiveServers, cli, fleet_at, random_calls, write_csv
+from tests.history.conftest import LiveServers, cli, fleet_at, random_calls, write_edge_calls
 
 
 def _closed_port() -> int:
@@ -55,11 +55,7 @@ def test_an_import_against_a_closed_port_exits_2_with_one_line(
     tmp_path: Path, drt: CompiledNetwork
 ) -> None:
     calls = random_calls(drt, 5, seed=1)
-    path = write_csv(
-        tmp_path / "calls.csv",
-        ["time", "edge", "offset"],
-        [[c["time"], c["edge"], c["offset"]] for c in calls],
-    )
+    path = write_edge_calls(tmp_path / "calls.csv", calls)
     url = f"http://127.0.0.1:{_closed_port()}"
     out = cli("history", "import", str(path), "--fleet", "f", "--service-url", url, "--quiet")
     assert out.returncode == 2
@@ -103,11 +99,7 @@ def test_a_service_killed_mid_import_keeps_whole_chunks_and_a_rerun_applies_each
     tmp_path: Path, drt: CompiledNetwork, live_server: LiveServers
 ) -> None:
     calls = random_calls(drt, 50, seed=9)
-    path = write_csv(
-        tmp_path / "calls.csv",
-        ["time", "edge", "offset"],
-        [[c["time"], c["edge"], c["offset"]] for c in calls],
-    )
+    path = write_edge_calls(tmp_path / "calls.csv", calls)
     table = read_calls(path)
     url = live_server()
     with HttpHistoryClient(url) as setup:
