@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from routing_svc.json_text import json_text
 from routing_svc.sim import CosimResult, CosimSpec, PolicyRun, parse_policies, run_cosim
 from routing_svc.sim.command import parse_seeds
 from routing_svc.sim.measures import DEFAULT_THRESHOLDS
@@ -418,9 +419,10 @@ summaries: `docs/figures/cosim/report.json`.
   `<ride>` in SUMO's personinfo output (request to pick-up). Service levels are over every
   request of the measured period: the 90th percentile (nearest rank) and the fraction
   served within the fleet's thresholds ({thresholds} s); a request never served counts as
-  an infinite wait. Empty km = the fleet's `routeLength` minus `occupiedDistance`. Load:
-  requests per vehicle-hour, and the busy fraction, the share of SUMO taxi states sampled
-  every 10 s in the request period that are driving to a pick-up or carrying a customer.
+  an infinite wait (`null` in the JSON). Empty km = the fleet's `routeLength` minus
+  `occupiedDistance`. Load: requests per vehicle-hour, and the busy fraction, the share of
+  SUMO taxi states sampled every 10 s in the request period that are driving to a pick-up
+  or carrying a customer.
 - **Goals** (issue "live operations"), per experiment, on the means over the seeds: `sa`'s
   mean wait ≤ 0.8 x `sumo-stop`'s; `sa`'s 90th-percentile wait ≤ 0.8 x `sumo-stop`'s;
   `sa`'s mean wait ≤ 1.05 x `optimum`'s. A missed goal gives the ratio and how many
@@ -622,7 +624,7 @@ def main(argv: list[str] | None = None) -> int:
         )
     if not report:
         parser.error(f"no experiment has finished in {args.workdir}; nothing was written")
-    (FIGURES / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    (FIGURES / "report.json").write_text(json_text(report, indent=2) + "\n", encoding="utf-8")
     command = "python bench/cosim_report.py --seeds " + ",".join(map(str, args.seeds))
     for option, value, default in (("--hours", args.hours, 2.0), ("--rate", args.rate, 40.0)):
         if value != default:

@@ -10,7 +10,6 @@ best-known) p-median of the same distribution.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -21,6 +20,7 @@ import numpy as np
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput
+from routing_svc.json_text import json_text
 from routing_svc.optimum import expected_cost, gap, solve_demand
 from routing_svc.sa import (
     DEFAULT_RULE,
@@ -352,5 +352,5 @@ def run(args: argparse.Namespace) -> int:
         step_scale=args.step_scale,
         rule=rule,
     )
-    print(json.dumps(report, indent=2))
+    print(json_text(report, indent=2))
     return 0

@@ -18,7 +18,6 @@ summary on stdout; bad rows are listed there (``skip``) or in the error
 from __future__ import annotations
 
 import argparse
-import json
 import os
 from contextlib import ExitStack
 from pathlib import Path
@@ -41,6 +40,7 @@ from routing_svc.history.replay import (
     replay_history,
 )
 from routing_svc.history.report import DEFAULT_THRESHOLDS, write_report
+from routing_svc.json_text import json_text
 from routing_svc.service.command import database_url_of
 from routing_svc.service.networks import NetworkEntry, NetworkRegistry
 from routing_svc.service.settings import Settings
@@ -197,7 +197,7 @@ def run_import(args: argparse.Namespace) -> int:
             summary["report"] = str(args.report)
             summary["gap_end"] = report["gap"]["curve"][-1]["gap"]
             summary["service_levels"] = report["service_levels"]["all"]
-    print(json.dumps(summary, indent=2))
+    print(json_text(summary, indent=2))
     return 0
 
 
@@ -242,5 +242,5 @@ def run_create(args: argparse.Namespace) -> int:
             for v in fleet["vehicles"]
         ],
     }
-    print(json.dumps(out, indent=2))
+    print(json_text(out, indent=2))
     return 0

@@ -20,7 +20,6 @@ by hour of day, and the reference positions before and after.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -30,6 +29,7 @@ import numpy.typing as npt
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.history.replay import Checkpoint
+from routing_svc.json_text import json_text
 from routing_svc.optimum import expected_cost, gap
 from routing_svc.sa import Objective
 from routing_svc.service.networks import NetworkEntry
@@ -224,5 +224,5 @@ def write_report(
     }
     plots = plot_report(folder, entry, report, checkpoints)
     report["plots"] = [p.name for p in plots]
-    (folder / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+    (folder / "report.json").write_text(json_text(report, indent=2) + "\n")
     return report

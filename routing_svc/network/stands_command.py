@@ -14,9 +14,9 @@ one-line error and exit code 2.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
+from routing_svc.json_text import json_text
 from routing_svc.network.cache import load_network
 from routing_svc.network.catalogue import resolve_network
 from routing_svc.network.stands import read_stands_file
@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
             "stands": [s.to_dict() for s in reading.usable],
             "dropped": [{"id": d.id, "edge": d.edge, "reason": d.reason} for d in reading.dropped],
         }
-        print(json.dumps(report, indent=2))
+        print(json_text(report, indent=2))
         return 0
     print(
         f"{len(reading.usable)} usable stands (capacity {reading.capacity}), "

@@ -26,7 +26,6 @@ one-line message and exit code 2.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +33,7 @@ import numpy as np
 
 from routing_svc.demand.spec import network_demand, parse_demand_spec
 from routing_svc.errors import InvalidInput
+from routing_svc.json_text import json_text
 from routing_svc.network import CompiledNetwork, RoadSpace, load_network
 from routing_svc.network.catalogue import resolve_network
 from routing_svc.network.costs import CostKind
@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
         time_limit=args.time_limit,
         stands=args.stands,
     )
-    print(json.dumps(report, indent=2))
+    print(json_text(report, indent=2))
     return 0
 
 

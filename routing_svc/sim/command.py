@@ -29,11 +29,11 @@ the vehicles that found no room in their stand.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
 from routing_svc.errors import InvalidInput
+from routing_svc.json_text import json_text
 from routing_svc.sim.dispatcher import QUEUE_ORDERS
 from routing_svc.sim.measures import DEFAULT_THRESHOLDS
 from routing_svc.sim.spec import DEFAULT_INCIDENT_SAMPLE
@@ -184,5 +184,5 @@ def run(args: argparse.Namespace) -> int:
 
         write_figures(result, out_dir=args.out, prefix="cosim")
     summary = result.summary()
-    print(json.dumps({"out": str(args.out), **summary}, indent=2))
+    print(json_text({"out": str(args.out), **summary}, indent=2))
     return 0

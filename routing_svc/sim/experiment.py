@@ -17,7 +17,6 @@ same traffic).
 
 from __future__ import annotations
 
-import json
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from routing_svc.errors import InvalidInput
+from routing_svc.json_text import json_text
 from routing_svc.sim.measures import PolicyRun
 from routing_svc.sim.policies import floored_step
 from routing_svc.sim.prepare import Prepared, cosim_stands, prepare_seeds
@@ -183,7 +183,7 @@ def run_cosim(
         run_saved, jobs, workers=workers, progress=progress and len(jobs) > 1, desc="runs"
     )
     (out_dir / "runs.json").write_text(
-        json.dumps({"spec": spec.to_dict(), "runs": [r.to_json() for r in runs]}) + "\n",
+        json_text({"spec": spec.to_dict(), "runs": [r.to_json() for r in runs]}) + "\n",
         encoding="utf-8",
     )
     curves, optimum_curve = prepared.evaluate(runs)
@@ -197,6 +197,6 @@ def run_cosim(
         prepared=prepared,
     )
     (out_dir / "summary.json").write_text(
-        json.dumps(result.summary(), indent=2, allow_nan=True) + "\n", encoding="utf-8"
+        json_text(result.summary(), indent=2) + "\n", encoding="utf-8"
     )
     return result

@@ -325,34 +325,35 @@ class PolicyRun:
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> PolicyRun:
-        """A run saved with :meth:`to_json`."""
+        """A run saved with :meth:`to_json` (a number written ``null``, not finite, is
+        read as NaN; the waits' percentiles are derived again from ``waits``)."""
         return cls(
             policy=str(data["policy"]),
             seed=int(data["seed"]),
             requests=int(data["requests"]),
             served=int(data["served"]),
-            mean_wait=float(data["mean_wait_s"]),
-            mean_wait_second_half=float(data["mean_wait_second_half_s"]),
-            empty_km=float(data["empty_km"]),
-            driven_km=float(data["driven_km"]),
+            mean_wait=_number(data["mean_wait_s"]),
+            mean_wait_second_half=_number(data["mean_wait_second_half_s"]),
+            empty_km=_number(data["empty_km"]),
+            driven_km=_number(data["driven_km"]),
             fallbacks=int(data["fallbacks"]),
             queued=int(data["queued"]),
             failed=int(data["failed"]),
-            sim_seconds=float(data["sim_seconds"]),
-            wall_seconds=float(data["wall_seconds"]),
+            sim_seconds=_number(data["sim_seconds"]),
+            wall_seconds=_number(data["wall_seconds"]),
             tripinfo=str(data["tripinfo"]),
             measure_from=float(data.get("measure_from", 0.0)),
             vehicles=int(data.get("vehicles", 0)),
-            request_hours=float(data.get("request_hours", math.nan)),
-            busy_fraction=float(data.get("busy_fraction", math.nan)),
+            request_hours=_number(data.get("request_hours")),
+            busy_fraction=_number(data.get("busy_fraction")),
             thresholds=tuple(float(t) for t in data.get("thresholds", DEFAULT_THRESHOLDS)),
             state_batches=int(data.get("state_batches", 0)),
             traffic_updates=int(data["traffic_updates"]),
             park_retries=int(data.get("park_retries", 0)),
             unparked=int(data.get("unparked", 0)),
             lost=int(data.get("lost", 0)),
-            waits=[(float(t), float(w), bool(ok)) for t, w, ok in data["waits"]],
-            predicted=[(float(t), bool(other)) for t, other in data["predicted"]],
+            waits=[(_number(t), _number(w), bool(ok)) for t, w, ok in data["waits"]],
+            predicted=[(_number(t), bool(other)) for t, other in data["predicted"]],
             snapshots=[
                 (float(t), {k: (str(v[0]), float(v[1])) for k, v in pos.items()})
                 for t, pos in data["snapshots"]
@@ -393,3 +394,8 @@ class PolicyRun:
             "wall_seconds": self.wall_seconds,
             "sim_speed": self.sim_speed,
         }
+
+
+def _number(value: Any) -> float:
+    """A saved number; ``None`` (JSON ``null``, how a non-finite one is written) is NaN."""
+    return math.nan if value is None else float(value)

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from routing_svc.client import FleetClient, HttpFleetClient
+from routing_svc.json_text import json_text
 from routing_svc.network.stands import Stand
 from routing_svc.sim.backend import SimulationError, make_backend
 from routing_svc.sim.dispatcher import FleetDispatcher, stand_homes
@@ -189,7 +190,7 @@ def run_saved(job: PolicyJob) -> PolicyRun:
         if saved.get("key") == key:
             return PolicyRun.from_json(saved["run"])
     run = run_policy(job)
-    path.write_text(json.dumps({"key": key, "run": run.to_json()}) + "\n", encoding="utf-8")
+    path.write_text(json_text({"key": key, "run": run.to_json()}) + "\n", encoding="utf-8")
     return run
 
 
