@@ -100,12 +100,14 @@ class HttpFleetClient:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def _send(self, method: str, path: str, **request: Any) -> httpx.Response:
+    def _send(
+        self, method: str, path: str, *, write: bool | None = None, **request: Any
+    ) -> httpx.Response:
         """One request; a transport failure becomes :class:`errors.ServiceUnreachable`.
 
-        A write whose answer was lost (broken connection, timeout) may have been
-        applied: the message says so, and a retry with the same idempotency key
-        settles it."""
+        A write (``write``; by default any method but ``GET``) whose answer was lost
+        (broken connection, timeout) may have been applied: the message says so, and a
+        retry with the same idempotency key settles it."""
         where = f"{method} {self._base_url}{path}"
         try:
             return self._http.request(method, path, **request)
@@ -117,7 +119,8 @@ class HttpFleetClient:
                 if isinstance(exc, httpx.TimeoutException)
                 else f"the connection broke ({exc.__class__.__name__}: {exc})"
             )
-            maybe = "" if method == "GET" else "; the request may have been applied"
+            writes = method != "GET" if write is None else write
+            maybe = "; the request may have been applied" if writes else ""
             raise errors.ServiceUnreachable(f"{where}: {lost}{maybe}") from exc
 
     def _json(self, response: httpx.Response) -> dict[str, Any]:
@@ -162,7 +165,9 @@ class HttpFleetClient:
         requires: Sequence[str] | None = None,
     ) -> dict[str, Any]:
         body = {"position": dict(position), "requires": list(requires) if requires else None}
-        return self._json(self._send("POST", f"/v1/fleets/{fleet_id}/assign", json=body))
+        return self._json(
+            self._send("POST", f"/v1/fleets/{fleet_id}/assign", json=body, write=False)
+        )
 
     def put_traveltimes(self, fleet_id: str, times: Mapping[str, float]) -> dict[str, Any]:
         return self._json(

@@ -153,6 +153,7 @@ class HttpHistoryClient(HttpFleetClient):
                 "POST",
                 f"/v1/networks/{network_id}/positions:resolve",
                 json={"positions": positions},
+                write=False,
             )
         )
 

@@ -79,6 +79,11 @@ def test_a_service_that_never_answers_times_out_and_a_write_may_have_been_applie
             f"POST {silent_server}/v1/fleets/f/targets: no answer within 0.3 s; "
             "the request may have been applied"
         )
+        with pytest.raises(ServiceUnreachable) as query:
+            client.assign("f", {"edge": "e", "offset": 0.0})
+        assert query.value.detail == (
+            f"POST {silent_server}/v1/fleets/f/assign: no answer within 0.3 s"
+        )
 
 
 class _KilledAfter(HttpHistoryClient):
