@@ -53,9 +53,8 @@ PUBLIC_DETAIL: dict[type[BaseException], str] = {
         "The event store did not answer within the request's deadline; nothing was written."
     ),
     errors.CommitOutcomeUnknown: (
-        "The write may or may not have been committed; retry it to settle it: with the same "
-        "Idempotency-Key, or, for a fleet's creation, the same body (201, or 409 if the "
-        "first one created the fleet)."
+        "The write may or may not have been committed; retry with the same Idempotency-Key "
+        "(a fleet's creation: the same body)."
     ),
     errors.ReplayMismatch: "The stored state of this fleet does not replay.",
     Exception: "An internal error occurred.",

@@ -82,7 +82,7 @@ def test_a_slow_store_after_the_solve_still_meets_the_deadline(
     events = client.get("/v1/fleets/f1/events", params={"after": 0}).json()["items"]
     assert [e["kind"] for e in events] == ["fleet_created"]
     # the answer says how to settle it, and the same body does
-    assert "for a fleet's creation, the same body" in r.json()["detail"]
+    assert "(a fleet's creation: the same body)" in r.json()["detail"]
     monkeypatch.undo()
     again = client.post("/v1/fleets", json=optimum_body(4, 200))
     assert again.status_code == 409, again.text
