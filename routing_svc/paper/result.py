@@ -8,12 +8,13 @@ figure can always be redrawn from its JSON.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+from routing_svc.json_text import finite_or_none
 
 JsonValue = Any
 """A value made of dicts, lists, str, int, float, bool and None."""
@@ -84,8 +85,8 @@ def jsonable(value: JsonValue) -> JsonValue:
     if isinstance(value, int | np.integer):
         return int(value)
     if isinstance(value, float | np.floating):
-        number = float(value)
-        return float(f"{number:.6g}") if math.isfinite(number) else None
+        number = finite_or_none(float(value))
+        return None if number is None else float(f"{number:.6g}")
     raise TypeError(f"not a JSON value: {value!r}")
 
 
