@@ -27,8 +27,8 @@ minimise it:
 - ``"heuristic"``: every type starts at the p-median
   (:func:`routing_svc.optimum.pmedian.solve_pmedian`) of the demand that needs
   it, then a deterministic best-improvement local search on the exact ``J``:
-  relocate one vehicle to any site (all sites evaluated at once: with the
-  others fixed, the ``m``-th smallest time of a group is
+  relocate one vehicle to any site (every site priced in one compiled pass: with
+  the others fixed, the ``m``-th smallest time of a group is
   ``min(max(tau, o_(m-1)), o_m)`` of the others' order statistics), and when
   no relocation gains, swap the sites of two vehicles of different kinds.
 
@@ -46,6 +46,7 @@ from dataclasses import dataclass
 from typing import Literal, TypeVar
 
 import numpy as np
+from numba import njit
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput, UnmetRequirement, Unreachable
@@ -69,9 +70,6 @@ MILP_MAX_PAIRS = 240
 
 #: A local-search move must lower ``J`` by more than this fraction.
 MOVE_TOLERANCE = 1e-12
-
-#: Candidate sites evaluated at once by a relocation (bounds temporary memory).
-BLOCK_ROWS = 256
 
 
 @dataclass(frozen=True, slots=True)
@@ -490,14 +488,40 @@ def _best_relocation(
             if order is None:
                 totals += cls.share * float(w @ fixed**q)
                 continue
-            for start in range(0, d.shape[0], BLOCK_ROWS):
-                tau = d[start : start + BLOCK_ROWS] / v[i]
-                t = np.maximum(np.minimum(np.maximum(tau, order[0]), order[1]), fixed)
-                totals[start : start + BLOCK_ROWS] += cls.share * (t**q @ w)
+            _add_relocated(totals, d, w, v[i], order[0], order[1], fixed, q, cls.share)
         site = int(np.argmin(totals))
         if totals[site] < best[2]:
             best = (i, site, float(totals[site]))
     return best
+
+
+@njit(cache=True)
+def _add_relocated(
+    totals: FloatArray,
+    d: FloatArray,
+    w: FloatArray,
+    speed: float,
+    lo: FloatArray,
+    hi: FloatArray,
+    fixed: FloatArray,
+    q: float,
+    share: float,
+) -> None:
+    """Add to ``totals[s]`` one class's ``share * sum_j w_j T_j**q`` with the relocated
+    vehicle at site ``s``: ``T_j = max(min(max(d[s, j] / speed, lo_j), hi_j), fixed_j)``,
+    its group's ``m``-th smallest time given the others' order statistics ``lo, hi`` and
+    the other groups' ``fixed`` (objective (11))."""
+    for s in range(d.shape[0]):
+        acc = 0.0
+        for j in range(d.shape[1]):
+            t = max(min(max(d[s, j] / speed, lo[j]), hi[j]), fixed[j])
+            if q == 1.0:
+                acc += w[j] * t
+            elif q == 2.0:
+                acc += w[j] * (t * t)
+            else:
+                acc += w[j] * t**q
+        totals[s] += share * acc
 
 
 def _best_swap(

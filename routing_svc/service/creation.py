@@ -43,8 +43,11 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
         check_mix(demand_spec, types)
     missing = [v.id for v in spec.vehicles if v.position is None]
     if spec.start is None and missing:
+        more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
+        named = ", ".join(missing[:5]) + more
         raise InvalidInput(
-            f"vehicles {missing[:5]} have no position; give positions or start from the optimum"
+            f"{len(missing)} of {n} vehicles have no position ({named}); give every vehicle "
+            "a position, or none and start from the optimum of a sample"
         )
     if spec.start is not None and len(missing) != n:
         raise InvalidInput("with 'start', leave every vehicle's position out")

@@ -173,6 +173,25 @@ def test_milp_and_heuristic_against_brute_force_on_random_matrices(seed: int) ->
     assert again.sites == heuristic.sites and again.objective == heuristic.objective
 
 
+@pytest.mark.parametrize("power", [1.0, 1.5, 2.0])
+def test_heuristic_ends_at_a_local_optimum_of_a_larger_instance(power: float) -> None:
+    # too many assignments for brute force (40 ** 6): every relocation and swap of the
+    # heuristic's answer, priced target by target, costs at least as much
+    rng = np.random.default_rng(int(power * 10))
+    costs = rng.uniform(0.0, 10.0, (40, 25))
+    w = rng.uniform(0.0, 1.0, 25)
+    types, speeds = ["A", "A", "B", "A", "B", "B"], [1.0, 1.5, 1.0, 1.0, 2.0, 1.0]
+    mix = MIXES[2]
+    heuristic = solve_heterogeneous(costs, w, types, speeds, mix, power=power, method="heuristic")
+    v = np.asarray(speeds)[:, None]
+    at = np.asarray(heuristic.sites)
+    assert loop_cost(costs[at] / v, types, w, mix, power) == pytest.approx(
+        heuristic.objective, rel=1e-12
+    )
+    for moved in relocations_and_swaps(heuristic, 40):
+        assert loop_cost(costs[moved] / v, types, w, mix, power) >= heuristic.objective * (1 - 1e-9)
+
+
 def test_two_required_vehicles_of_one_type_may_share_a_site() -> None:
     # all demand at atom 0 needs two A's; site 0 is next to it, the others far
     costs = np.array([[0.0, 9.0], [5.0, 0.0], [6.0, 1.0]])

@@ -107,6 +107,10 @@ def test_duplicate_vehicle_ids_and_missing_positions(client: TestClient) -> None
     assert_problem(client.post("/v1/fleets", json=body), 422, "unique")
     body = fleet_body(vehicles=[{"id": "a"}])
     assert_problem(client.post("/v1/fleets", json=body), 422, "position")
+    placed = {"id": "p", "position": {"edge": edge(0)}}
+    body = fleet_body(vehicles=[placed, *({"id": f"u{i}"} for i in range(7))])
+    r = client.post("/v1/fleets", json=body)
+    assert_problem(r, 422, "7 of 8 vehicles have no position (u0, u1, u2, u3, u4 and 2 more)")
     assert client.get("/v1/fleets").json()["items"] == []
 
 
