@@ -55,6 +55,8 @@ def test_distinct_sites_give_the_same_optimum_with_fewer_rows(
     distinct = solve_demand(space, demand, 3, sites=ends, distinct=True, method="milp")
     assert len(distinct.sites) < len(every.sites) and set(distinct.sites) <= set(every.sites)
     assert len({tuple(row) for row in distinct.matrix.tolist()}) == len(distinct.sites)
+    kept = [every.sites.index(site) for site in distinct.sites]
+    assert kept == sorted(kept) and np.array_equal(distinct.matrix, every.matrix[kept])
     assert every.solution.proven_optimal and distinct.solution.proven_optimal
     assert distinct.objective == pytest.approx(every.objective, rel=1e-9)
 
