@@ -1,0 +1,57 @@
+"""``bench/drift.py`` prints one JSON document whose summary is that of its records, at
+the checkpoints of its drift, and refuses bad options before any work."""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run(tmp_path: Path, *options: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "drift.py"), *options],
+        capture_output=True, text=True, timeout=600, cwd=tmp_path,
+    )  # fmt: skip
+
+
+def test_drift_report_is_its_records(tmp_path: Path) -> None:
+    done = run(
+        tmp_path, "--nets", "grid", "--vehicles", "2", "--seeds", "0,1", "--settle", "500",
+        "--drift", "2000", "--hold", "1000", "--jobs", "1",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    records = report["records"]
+    assert [(r["network"], r["vehicles"], r["seed"]) for r in records] == [
+        ("grid", 2, 0),
+        ("grid", 2, 1),
+    ]
+    answers = ("consolidating", "probe", "recent_2000", "recent_4000")
+    labels = ["settled", "drift 1/4", "drift 2/4", "drift 3/4", "drift 4/4", "+1000"]
+    table = report["median_over_seeds"]["grid/2"]
+    for answer in answers:
+        for r in records:
+            assert list(r[answer]) == labels
+            assert all(math.isfinite(g) and g > -0.5 for g in r[answer].values())
+        for label in labels:
+            assert table[answer][label] == statistics.median(r[answer][label] for r in records)
+        during = [(table[answer][label], f"grid/2@{label}") for label in labels[1:5]]
+        assert tuple(report["worst_during_drift"][answer]) == max(during)
+
+
+def test_drift_refuses_bad_options_before_any_work(tmp_path: Path) -> None:
+    for options, message in (
+        (["--nets", "nosuch"], "'nosuch' is neither a known network"),
+        (["--drift", "3000"], "--drift must be a positive multiple of 2000"),
+        (["--hold", "0"], "--settle, --hold and --jobs must be at least 1"),
+    ):
+        done = run(tmp_path, *options)
+        assert done.returncode == 2, (options, done.stderr)
+        assert message in done.stderr.strip().splitlines()[-1]
+        assert done.stdout == ""
