@@ -77,7 +77,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         default=None,
         metavar="N",
         help="subsample the candidate sites (default: every one; never more than a cost "
-        "matrix of 2 GiB holds, and the heuristic holds it twice: about 4.5 GB at the peak)",
+        "matrix of 2 GiB holds; the heuristic also keeps it transposed, twice that at the peak)",
     )
     parser.add_argument(
         "--time-limit", type=float, default=60.0, metavar="SECONDS", help="for the exact method"
