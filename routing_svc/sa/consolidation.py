@@ -38,7 +38,10 @@ each time the targets seen in the epoch have grown by the factor ``growth``, the
 period capped at ``longest``; and each time the targets since the references were
 last replaced have grown by that factor, that period capped at ``slowest``, so that a
 fleet whose consolidations keep being turned down (it has learnt a demand that
-stays) consolidates ever more rarely. The mean cost of
+stays) consolidates ever more rarely. A consolidation taken with a cross-validated
+gain beyond ``hasten`` standard errors restarts the epoch's clock: references that far
+off mean that the demand moves (or is still being learnt), so the next comes ``first``
+targets later. The mean cost of
 each block of targets is compared with the mean cost expected of the references
 at the last consolidation. Blocks in a row that each cost ``shift_ratio`` times more,
 together by more than ``shift_confidence`` standard errors of their mean (so that the
@@ -98,6 +101,11 @@ class ConsolidationPolicy:
     slowest : int
         The longest period of the clock since the references were last replaced
         (at least ``longest``); a period is the longer of the two clocks'.
+    hasten : float or None
+        A consolidation taken with a cross-validated gain beyond this many standard
+        errors restarts the epoch's clock (:meth:`next_after`), so that a demand that
+        keeps moving is fitted every ``first`` targets or so, not every tenth of the
+        epoch; ``None``: the clock runs from the epoch's start.
     folds : int
         Folds of the cross-validated test.
     confidence : float
@@ -154,6 +162,7 @@ class ConsolidationPolicy:
     growth: float = 1.1
     longest: int = 4000
     slowest: int = 32000
+    hasten: float | None = 3.0
     folds: int = 4
     confidence: float = 0.0
     settled_confidence: float = 1.0
@@ -186,6 +195,13 @@ class ConsolidationPolicy:
                 raise InvalidInput(f"consolidation {name} must be a number, got {value!r}")
             if not (math.isfinite(value) and value >= 0.0):
                 raise InvalidInput(f"consolidation {name} must be a finite number >= 0")
+        if self.hasten is not None and not (
+            isinstance(self.hasten, float | int)
+            and not isinstance(self.hasten, bool)
+            and math.isfinite(self.hasten)
+            and self.hasten >= 0.0
+        ):
+            raise InvalidInput("consolidation hasten must be a finite number >= 0, or null")
         if not (math.isfinite(self.shift_ratio) and self.shift_ratio > 1.0):
             raise InvalidInput("consolidation shift_ratio must be a finite number > 1")
         if self.refit is not None and not (
@@ -213,6 +229,7 @@ class ConsolidationPolicy:
             "shift_ratio": self.shift_ratio,
             # a policy of the behaviour before these six stores the bytes it had then
             **({"slowest": self.slowest} if self.slowest != self.longest else {}),
+            **({} if self.hasten is None else {"hasten": self.hasten}),
             **(
                 {"settled_confidence": self.settled_confidence}
                 if self.settled_confidence != self.confidence
@@ -235,11 +252,11 @@ class ConsolidationPolicy:
     def from_dict(cls, data: dict[str, Any]) -> ConsolidationPolicy:
         """A stored policy; one stored without ``refit``, ``tested_refit``,
         ``fresh_baseline``, ``checked_moves``, ``shakes``, ``slowest``,
-        ``settled_confidence``, ``shift_confidence`` or ``unfitted_confidence`` keeps the
-        behaviour it was stored with (no refit, a refit tested, the reservoir's baseline,
-        unchecked moves, no shakes, the epoch's clock alone, one confidence throughout,
-        the shift test's ratio alone, no more asked of references no consolidation
-        fitted)."""
+        ``settled_confidence``, ``shift_confidence``, ``unfitted_confidence`` or
+        ``hasten`` keeps the behaviour it was stored with (no refit, a refit tested, the
+        reservoir's baseline, unchecked moves, no shakes, the epoch's clock alone, one
+        confidence throughout, the shift test's ratio alone, no more asked of references
+        no consolidation fitted, a clock that runs from the epoch's start)."""
         if not isinstance(data, dict):
             raise InvalidInput("consolidation must be an object")
         legacy = {
@@ -250,6 +267,7 @@ class ConsolidationPolicy:
             "shakes": 0,
             "shift_confidence": 0.0,
             "unfitted_confidence": 0.0,
+            "hasten": None,
         }
         unknown = set(data) - {*cls().to_dict(), *legacy, "slowest", "settled_confidence"}
         if unknown:
@@ -267,10 +285,11 @@ class ConsolidationPolicy:
         exactly a tenth)."""
         return math.ceil(round(targets * (self.growth - 1.0), 9))
 
-    def next_after(self, *, now: int, epoch: int, accepted_at: int) -> int:
+    def next_after(self, *, now: int, epoch: int, accepted_at: int, hastened_at: int = 0) -> int:
         """The target count of the next consolidation after one at ``now``, in an epoch
-        that began at ``epoch``, references last replaced at ``accepted_at``."""
-        clock = min(max(self._growth_of(now - epoch), self.first), self.longest)
+        that began at ``epoch``, references last replaced at ``accepted_at``, the
+        epoch's clock last restarted (:attr:`hasten`) at ``hastened_at``."""
+        clock = min(max(self._growth_of(now - max(epoch, hastened_at)), self.first), self.longest)
         quiet = min(self._growth_of(now - max(epoch, accepted_at)), self.slowest)
         return now + max(clock, quiet)
 
@@ -308,7 +327,17 @@ class ConsolidationPolicy:
         excess = mean - self.shift_ratio * baseline
         return excess > 0.0 and excess > self.shift_confidence * math.sqrt(spread / size)
 
-    def apply_by(self, *, due: int, epoch: int, accepted_at: int) -> int:
+    def hastens(self, done: Consolidation[Any]) -> bool:
+        """Whether ``done`` restarts the epoch's clock: taken, with a cross-validated
+        gain beyond :attr:`hasten` standard errors (an untested refit has none)."""
+        return (
+            self.hasten is not None
+            and done.accepted
+            and done.standard_error > 0.0
+            and -done.gain > self.hasten * done.standard_error
+        )
+
+    def apply_by(self, *, due: int, epoch: int, accepted_at: int, hastened_at: int = 0) -> int:
         """The target count by which a consolidation that fell due at ``due`` and is
         solved away from the fleet must be applied: when the one after it would fall due
         were it applied at ``due``, so that however fast targets come the schedule keeps
@@ -319,7 +348,9 @@ class ConsolidationPolicy:
         new fleet where it started."""
         if due - epoch <= self.first:
             return due
-        return self.next_after(now=due, epoch=epoch, accepted_at=accepted_at)
+        return self.next_after(
+            now=due, epoch=epoch, accepted_at=accepted_at, hastened_at=hastened_at
+        )
 
 
 @dataclass(frozen=True, slots=True)

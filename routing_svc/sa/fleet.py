@@ -260,6 +260,9 @@ class Learning(Generic[P]):
     fitted: int = 0
     """Reservoir targets the current references were fitted to by a consolidation of
     this epoch (0: they were not)."""
+    hastened_at: int = 0
+    """Target count of the last consolidation that restarted the epoch's clock
+    (:meth:`ConsolidationPolicy.hastens`; 0: none)."""
     block_cost: float = 0.0
     block_size: int = 0
     block_squares: float = 0.0
@@ -747,9 +750,14 @@ class Fleet(Generic[P]):
             learning.holds = [None] * len(self.vehicles)
             learning.accepted_at = state.targets
             learning.fitted = done.sample
+            if policy.hastens(done):
+                learning.hastened_at = state.targets
         learning.baseline = done.fresh_baseline if policy.fresh_baseline else done.baseline
         learning.next_consolidation = policy.next_after(
-            now=state.targets, epoch=learning.epoch, accepted_at=learning.accepted_at
+            now=state.targets,
+            epoch=learning.epoch,
+            accepted_at=learning.accepted_at,
+            hastened_at=learning.hastened_at,
         )
         return done
 
@@ -774,7 +782,12 @@ class Fleet(Generic[P]):
         if learning is None or policy is None or not self._consolidates():
             return None
         due = learning.next_consolidation
-        return due, policy.apply_by(due=due, epoch=learning.epoch, accepted_at=learning.accepted_at)
+        return due, policy.apply_by(
+            due=due,
+            epoch=learning.epoch,
+            accepted_at=learning.accepted_at,
+            hastened_at=learning.hastened_at,
+        )
 
     def consolidation_job(self) -> ConsolidationJob[P] | None:
         """The due consolidation's inputs, copied (``None`` when none is due)."""
@@ -1024,6 +1037,7 @@ class Fleet(Generic[P]):
                 if policy.shift_confidence
                 else {}
             ),
+            **({"hastened_at": learning.hastened_at} if policy.hasten is not None else {}),
         }
 
     def _learning_from(self, data: dict[str, Any]) -> Learning[P]:
@@ -1053,6 +1067,7 @@ class Fleet(Generic[P]):
             block_squares=float(data.get("block_squares", 0.0)),
             run=_run_of(data.get("run", [0.0, 0.0, 0])),
             fitted=int(data.get("fitted", 0)),
+            hastened_at=int(data.get("hastened_at", 0)),
         )
 
     def restore(self, data: dict[str, Any]) -> None:

@@ -711,6 +711,11 @@ def test_consolidate_rejects_mismatched_inputs(space: RoadSpace) -> None:
         {"unfitted_confidence": False},
         {"tested_refit": 1},
         {"tested_refit": "false"},
+        {"hasten": -1.0},
+        {"hasten": math.nan},
+        {"hasten": math.inf},
+        {"hasten": True},
+        {"hasten": "3"},
     ],
 )
 def test_policy_validation(bad: dict[str, Any]) -> None:
@@ -747,6 +752,8 @@ def test_policy_round_trip() -> None:
         ConsolidationPolicy(unfitted_confidence=0.0),
         ConsolidationPolicy(unfitted_confidence=3.5),
         ConsolidationPolicy(tested_refit=True),
+        ConsolidationPolicy(hasten=None),
+        ConsolidationPolicy(hasten=4.5),
     ):
         data = json.loads(json.dumps(policy.to_dict()))
         assert ConsolidationPolicy.from_dict(data) == policy
@@ -762,6 +769,7 @@ def test_policy_round_trip() -> None:
         settled_confidence=0.0,
         shift_confidence=0.0,
         unfitted_confidence=0.0,
+        hasten=None,
     )
     assert ConsolidationPolicy.from_dict({"confidence": 0.5}).settled_confidence == 0.5
     assert ConsolidationPolicy.from_dict({"longest": 300}).slowest == 300
@@ -886,14 +894,15 @@ def consolidating_fleet(
     return Fleet.create(space, list(zip(fleet_vehicles, starts, strict=True)), config)
 
 
-CALM = ConsolidationPolicy(shift_ratio=1e9)  # the shift test never fires
+CALM = ConsolidationPolicy(shift_ratio=1e9, hasten=None)
+"""The shift test never fires, and the epoch's clock never restarts."""
 
 
 def small_calm(**changes: Any) -> ConsolidationPolicy:
     """A small reservoir on the schedule of periods of a quarter, no shift test: the
     schedules and confidences the tests below work out by hand."""
     base: dict[str, Any] = dict(
-        reservoir=400, first=50, growth=1.25, longest=100, block=50, shift_ratio=1e9
+        reservoir=400, first=50, growth=1.25, longest=100, block=50, shift_ratio=1e9, hasten=None
     )
     return ConsolidationPolicy(**{**base, **changes})
 
@@ -910,7 +919,7 @@ def test_policy_defaults() -> None:
     )
     assert (policy.refit, policy.fresh_baseline, policy.checked_moves) == (1.1, True, True)
     assert (policy.shakes, policy.slowest, policy.settled_confidence) == (20, 32_000, 1.0)
-    assert (policy.shift_confidence, policy.unfitted_confidence) == (2.0, 3.0)
+    assert (policy.shift_confidence, policy.unfitted_confidence, policy.hasten) == (2.0, 3.0, 3.0)
 
 
 Run = tuple[list[NetPosition], Fleet[NetPosition], list[Any]]
@@ -963,6 +972,91 @@ def test_a_fleet_whose_consolidations_are_turned_down_consolidates_more_rarely(
     periods = np.diff(expected)
     assert periods.max() > 100  # the quiet clock acted
     assert not all(taken.values()) and any(taken.values())
+
+
+def test_hastened_clock_by_hand() -> None:
+    policy = ConsolidationPolicy(first=250, growth=1.5, longest=8000, slowest=8000, hasten=3.0)
+
+    def after(now: int, hastened_at: int, epoch: int = 0) -> int:
+        return policy.next_after(now=now, epoch=epoch, accepted_at=now, hastened_at=hastened_at)
+
+    assert after(20_000, hastened_at=0) == 28_000  # the epoch's clock: 8,000
+    assert after(20_000, hastened_at=20_000) == 20_250  # restarted now: 0 -> 250
+    assert after(20_000, hastened_at=19_000) == 20_500  # restarted 1,000 ago: 500
+    assert after(20_000, hastened_at=5_000, epoch=19_800) == 20_250  # a later epoch: 100 -> 250
+    assert policy.apply_by(due=20_000, epoch=0, accepted_at=19_000, hastened_at=19_000) == 20_500
+    # the quiet clock still lengthens the periods of references kept long
+    assert policy.next_after(now=20_000, epoch=0, accepted_at=4_000, hastened_at=20_000) == 28_000
+
+
+def test_which_consolidations_hasten(calm_run: Run) -> None:
+    _, _, outcomes = calm_run
+    done = next(o.consolidation for o in outcomes if o.consolidation is not None)
+    assert done is not None
+    policy = ConsolidationPolicy(hasten=3.0)
+
+    def record(accepted: bool, gain: float, standard_error: float) -> Consolidation[NetPosition]:
+        return dataclasses.replace(
+            done, accepted=accepted, gain=gain, standard_error=standard_error
+        )
+
+    assert policy.hastens(record(True, -3.1, 1.0))
+    assert not policy.hastens(record(True, -3.0, 1.0))  # beyond, not at
+    assert not policy.hastens(record(True, -2.0, 1.0))
+    assert not policy.hastens(record(False, -5.0, 1.0))  # turned down (unfitted asks more)
+    assert not policy.hastens(record(True, 0.0, 0.0))  # an untested refit
+    assert not ConsolidationPolicy(hasten=None).hastens(record(True, -50.0, 1.0))
+    assert ConsolidationPolicy(hasten=0.0).hastens(record(True, -1e-9, 1.0))
+
+
+def test_a_consolidation_taken_with_a_large_gain_restarts_the_epochs_clock(
+    space: RoadSpace,
+) -> None:
+    policy = small_calm(hasten=3.0)
+    # the fleet starts far from a demand that stays: its first fits gain far beyond
+    # three standard errors, the later ones do not
+    _, stream = demand_stream(3, 3000)
+    fleet = consolidating_fleet(space, policy=policy)
+    outcomes = [fleet.observe(z) for z in stream]
+    done = {o.target_number + 1: o.consolidation for o in outcomes if o.consolidation}
+    # by hand: a quarter of the targets since the epoch's start or the last taken
+    # consolidation whose gain exceeded three standard errors (50 to 100), or a quarter
+    # of those since the references were last replaced (up to 32,000)
+    expected, due, accepted_at, hastened_at, hastened = [], 50, 0, 0, []
+    while due <= len(stream):
+        expected.append(due)
+        record = done.get(due)
+        if record is not None and record.accepted:
+            accepted_at = due
+            if record.standard_error > 0.0 and -record.gain > 3.0 * record.standard_error:
+                hastened_at = due
+                hastened.append(due)
+        clock = min(max(math.ceil((due - hastened_at) * 0.25), 50), 100)
+        quiet = min(math.ceil((due - accepted_at) * 0.25), 32_000)
+        due += max(clock, quiet)
+    assert sorted(done) == expected
+    assert hastened and len(hastened) < len(expected)
+    learning = fleet.state.learning
+    assert learning is not None and learning.hastened_at == hastened[-1]
+    # and brought consolidations sooner than the epoch's clock alone would have
+    assert any(
+        b - a < min(max(math.ceil(a * 0.25), 50), 100) for a, b in itertools.pairwise(expected)
+    )
+    # the state restores, and goes on as the fleet would
+    cut = 1234
+    first = consolidating_fleet(space, policy=policy)
+    for z in stream[:cut]:
+        first.observe(z)
+    saved = json.loads(json.dumps(first.snapshot()))
+    assert saved["learning"]["hastened_at"] == first.state.learning.hastened_at  # type: ignore[union-attr]
+    restored = consolidating_fleet(space, policy=policy)
+    restored.restore(saved)
+    for z, out in zip(stream[cut:], outcomes[cut:], strict=True):
+        assert restored.observe(z) == out
+    # a fleet whose clock never restarts keeps the snapshot it had
+    calm = consolidating_fleet(space, policy=small_calm())
+    calm.observe(stream[0])
+    assert "hastened_at" not in calm.snapshot()["learning"]
 
 
 def test_a_settled_demand_asks_more_of_a_consolidation(
@@ -1270,11 +1364,11 @@ def test_identical_vehicles_consolidate_on_the_schedule_whatever_their_common_sp
     # changes the waiting times, not which demand moved (the block costs and the baseline
     # are in the same units)
     _, stream = demand_stream(7, 3000)
-    policy = ConsolidationPolicy()
+    policy = ConsolidationPolicy(hasten=None)
     expected = schedule(policy, start=250, epoch=0, until=3000)
     for speed in (1.0, 0.5):
         fleet = consolidating_fleet(
-            space, vehicles=[Vehicle(f"v{i}", speed=speed) for i in range(4)]
+            space, vehicles=[Vehicle(f"v{i}", speed=speed) for i in range(4)], policy=policy
         )
         outcomes = [fleet.observe(z) for z in stream]
         done = [o.target_number + 1 for o in outcomes if o.consolidation is not None]
@@ -1304,7 +1398,7 @@ def test_a_shift_of_the_demand_starts_a_new_epoch(space: RoadSpace) -> None:
     )
     # a ratio of 2: the demand moving across the district costs several times more, while
     # the noise of a 250-target block of the stationary demand stays well below it
-    policy = ConsolidationPolicy(shift_ratio=2.0)
+    policy = ConsolidationPolicy(shift_ratio=2.0, hasten=None)
     fleet = consolidating_fleet(space, policy=policy)
     west = [fleet.observe(z) for z in west_targets]
     done = [o.target_number + 1 for o in west if o.consolidation is not None]
@@ -1363,7 +1457,7 @@ def test_far_targets_in_blocks_in_a_row_start_an_epoch_together(space: RoadSpace
     # growth of 1.5: 1,688, then 2,532): neither block alone exceeds 1.25 times the
     # baseline by two standard errors, the two together do, at 2,500; the ratio alone
     # starts the epoch at the first, 2,250
-    policy = ConsolidationPolicy(growth=1.5)
+    policy = ConsolidationPolicy(growth=1.5, hasten=None)
     _, stream = demand_stream(7, 2750)
     head = consolidating_fleet(space, policy=policy)
     for z in stream[:2000]:
@@ -1389,7 +1483,9 @@ def test_far_targets_in_blocks_in_a_row_start_an_epoch_together(space: RoadSpace
     learning = fleet.state.learning
     assert learning is not None and learning.epoch == 2500
     assert first_shift(outcomes, policy) == 2500
-    alone = consolidating_fleet(space, policy=ConsolidationPolicy(growth=1.5, shift_confidence=0))
+    alone = consolidating_fleet(
+        space, policy=ConsolidationPolicy(growth=1.5, shift_confidence=0, hasten=None)
+    )
     for z in targets:
         alone.observe(z)
     assert alone.state.learning is not None and alone.state.learning.epoch == 2250
