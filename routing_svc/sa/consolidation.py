@@ -227,7 +227,7 @@ class ConsolidationPolicy:
             "confidence": self.confidence,
             "block": self.block,
             "shift_ratio": self.shift_ratio,
-            # a policy of the behaviour before these six stores the bytes it had then
+            # a policy stored before any of these keeps the bytes it had then
             **({"slowest": self.slowest} if self.slowest != self.longest else {}),
             **({} if self.hasten is None else {"hasten": self.hasten}),
             **(
