@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 from collections.abc import Callable
@@ -9,10 +10,12 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import httpx
+import numpy as np
 import pytest
 
 from routing_svc.errors import InvalidInput, UnknownEdge
 from routing_svc.history import (
+    HistoryInterrupted,
     HistoryRefused,
     InProcessHistoryClient,
     place_locally,
@@ -311,3 +314,28 @@ def test_a_chunk_and_the_batch_route_share_keys_and_a_bad_chunk_applies_nothing(
         with pytest.raises(refused):
             client.post_chunk("f", CallChunk(edges, offsets, [None, None]), idempotency_key="k2")
     assert client.get_fleet("f") == state
+
+
+def test_a_chunk_that_fails_stops_the_import_with_every_chunk_before_it_applied_and_none_after(
+    tmp_path: Path, client: InProcessHistoryClient, drt: CompiledNetwork
+) -> None:
+    calls = random_calls(drt, 50, seed=8)
+    path = write_edge_calls(tmp_path / "calls.csv", calls)
+    client.create_fleet(fleet_at([(calls[0]["edge"], 0.0), (calls[1]["edge"], 0.0)]))
+    table = read_calls(path)
+    placed = place_locally(table, client.service.network("drt"), vehicle_types=None)
+    order = np.argsort(table.seconds[placed.rows], kind="stable")
+    broken = copy.deepcopy(placed)
+    broken.edges[int(order[32])] = "no-such-edge"  # in chunk 4 of 5 (10 calls each)
+    with pytest.raises(HistoryInterrupted) as interrupted:
+        replay_history(table, broken, client, "f", chunk_size=10, progress=False)
+    assert interrupted.value.detail.startswith("chunk 4 of 5 failed (")
+    assert interrupted.value.detail.endswith(
+        "chunks 1 to 3 are applied, and the same command again applies each call once"
+    )
+    assert client.get_fleet("f")["version"] == 31  # chunk 4 applied nothing, chunk 5 was not sent
+    in_order = sorted(calls, key=lambda c: c["time"])
+    assert _event_targets(client, "f") == [(c["edge"], c["offset"]) for c in in_order[:30]]
+    resumed = replay_history(table, placed, client, "f", chunk_size=10, progress=False)
+    assert (resumed.applied, resumed.applied_chunks, resumed.version_after) == (20, 2, 51)
+    assert _event_targets(client, "f") == [(c["edge"], c["offset"]) for c in in_order]
