@@ -1,0 +1,196 @@
+"""Learning with vehicles of two types: how far each rule stays from the optimum of objective (11).
+
+Half the fleet is of type ``A``, half of type ``B`` (one speed); each target of the
+three-hotspot demand of ``bench/learning.py`` needs one vehicle of type ``A`` or one of
+type ``B``, with equal chance wherever it appears. Objective (11) is then the sum of two
+p-medians, one per type on the whole demand, each weighted by its share: the optimum is
+the best p-median of the demand for ``n / 2`` vehicles, and a fleet's gap is its exact
+expected cost (:func:`~routing_svc.optimum.heterogeneous.heterogeneous_cost`, objective
+(11) in general form) against it.
+
+Rules: ``probe`` (what a fleet of several types learns by when it names no rule),
+``paper`` (eq. (10) alone) and ``consolidating`` (for such a fleet the held step alone,
+without consolidations); from a *cold* start (random positions) and a *warm* one (at the
+optimum). The named baseline, in the same run on the same targets, is the batch answer:
+per type, the p-median of the targets seen so far that needed that type. Medians over
+seeds; the worst network counts; the goals are those of the learning issue.
+
+Run: ``python bench/heterogeneous.py`` (seven networks, 8 and 20 vehicles, seeds 0-2) or,
+e.g., ``python bench/heterogeneous.py --nets drt --vehicles 8 --seeds 0``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any
+
+import numpy as np
+from learning import NETWORKS, instance, network_file, network_name
+
+from routing_svc.demand import DemandDistribution
+from routing_svc.errors import InvalidInput, UnknownNetwork
+from routing_svc.optimum import solve_demand
+from routing_svc.optimum.heterogeneous import RequirementClass, heterogeneous_cost
+from routing_svc.sa import Fleet, Objective, Vehicle, learning_config
+from routing_svc.sim.command import parse_seeds
+from routing_svc.types import NetPosition
+
+TYPES = ("A", "B")
+MIX = (RequirementClass(("A",), 0.5), RequirementClass(("B",), 0.5))
+RULES = ("probe", "paper", "consolidating")
+SCENARIOS = ("cold", "warm")
+CHECKPOINTS = (300, 1000, 3000, 10000)
+GOALS = {"cold_3000": 0.05, "warm_every": 0.05, "warm_from_3000": 0.015}
+
+Job = tuple[str, int, int, int]
+
+
+def job(args: Job) -> dict[str, Any]:
+    net, n, seed, targets = args
+    t0 = time.perf_counter()
+    inst = instance(net, n, seed)
+    space = inst.space
+    types = [TYPES[0]] * (n // 2) + [TYPES[1]] * (n - n // 2)
+    speeds = np.ones(n)
+    per_type = {t: solve_demand(space, inst.demand, types.count(t)) for t in TYPES}
+    optimum = sum(c.share * per_type[c.requires[0]].objective for c in MIX)
+    at_optimum = [p for t in TYPES for p in per_type[t].positions]
+
+    def gap(positions: list[NetPosition]) -> float:
+        value = heterogeneous_cost(space, positions, types, speeds, inst.demand, MIX)
+        return float(value / optimum - 1.0)
+
+    rng = np.random.default_rng([seed, 1])
+    stream = inst.demand.sample(rng, targets)
+    needs = [TYPES[int(u >= 0.5)] for u in rng.random(targets)]
+    marks = [k for k in CHECKPOINTS if k <= targets]
+    record: dict[str, Any] = {
+        "network": network_name(net),
+        "vehicles": n,
+        "seed": seed,
+        "optimum": optimum,
+        "gap_at_optimum": gap(at_optimum),  # objective (11) of the per-type optima: 0
+        "batch": {},
+    }
+    for k in marks:
+        positions = []
+        for t in TYPES:
+            seen = [z for z, need in zip(stream[:k], needs[:k], strict=True) if need == t]
+            sample = DemandDistribution.of_targets(f"seen {t}", seen)
+            positions += solve_demand(space, sample, types.count(t), method="heuristic").positions
+        record["batch"][str(k)] = gap(positions)
+    for rule in RULES:
+        record[rule] = {}
+        for scenario in SCENARIOS:
+            config = learning_config(
+                rule,
+                typical_cost=space.typical_cost(),
+                n_vehicles=n,
+                objective=Objective(1.0),
+                seed=seed,
+            )
+            start = at_optimum if scenario == "warm" else inst.random_start
+            vehicles = [(Vehicle(f"v{i:03d}", types[i]), p) for i, p in enumerate(start)]
+            fleet = Fleet.create(space, vehicles, config)
+            gaps = {}
+            for k, (z, need) in enumerate(zip(stream, needs, strict=True), start=1):
+                fleet.observe(z, [need])
+                if k in marks:
+                    gaps[str(k)] = gap(list(fleet.state.positions))
+            record[rule][scenario] = gaps
+    record["seconds"] = time.perf_counter() - t0
+    print(f"{record['network']} n={n} seed={seed}: {record['seconds']:.0f} s", file=sys.stderr)
+    return record
+
+
+def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
+    """Medians over seeds per network and size; per checkpoint, the worst of them."""
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for r in records:
+        groups.setdefault(f"{r['network']}/{r['vehicles']}", []).append(r)
+    table: dict[str, dict[str, Any]] = {}
+    for key, rs in sorted(groups.items()):
+        entry: dict[str, Any] = {
+            "batch": {k: statistics.median(r["batch"][k] for r in rs) for k in rs[0]["batch"]}
+        }
+        for rule in RULES:
+            entry[rule] = {
+                s: {k: statistics.median(r[rule][s][k] for r in rs) for k in rs[0][rule][s]}
+                for s in SCENARIOS
+            }
+        table[key] = entry
+    labels = list(records[0]["batch"])
+    worst: dict[str, Any] = {
+        "batch": {k: max((e["batch"][k], key) for key, e in table.items()) for k in labels}
+    }
+    for rule in RULES:
+        worst[rule] = {
+            s: {k: max((e[rule][s][k], key) for key, e in table.items()) for k in labels}
+            for s in SCENARIOS
+        }
+    goals = {}
+    for rule in RULES:
+        cold, warm = worst[rule]["cold"], worst[rule]["warm"]
+        late = [k for k in labels if int(k) >= 3000]
+        goals[rule] = {
+            "cold_3000": [*cold["3000"], cold["3000"][0] <= GOALS["cold_3000"]]
+            if "3000" in cold
+            else None,
+            "warm_every": [*max(warm.values()), max(warm.values())[0] <= GOALS["warm_every"]],
+            "warm_from_3000": [
+                *max(warm[k] for k in late),
+                max(warm[k] for k in late)[0] <= GOALS["warm_from_3000"],
+            ]
+            if late
+            else None,
+        }
+    return {"median_over_seeds": table, "worst_network": worst, "goals": goals}
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--nets", default=",".join(NETWORKS))
+    p.add_argument("--vehicles", type=parse_seeds, default="8,20")
+    p.add_argument("--seeds", type=parse_seeds, default="0,1,2")
+    p.add_argument("--targets", type=int, default=max(CHECKPOINTS))
+    p.add_argument("--jobs", type=int, default=2)
+    args = p.parse_args()
+    try:
+        for net in args.nets.split(","):
+            network_file(net)
+    except (InvalidInput, UnknownNetwork) as e:
+        p.error(str(e))
+    if args.targets < min(CHECKPOINTS) or args.jobs < 1:
+        p.error(f"--targets must be at least {min(CHECKPOINTS)} and --jobs at least 1")
+    if any(n < 2 for n in args.vehicles):
+        p.error("--vehicles: at least 2 (one of each type)")
+    started = time.perf_counter()
+    jobs: list[Job] = [
+        (net, n, seed, args.targets)
+        for net in args.nets.split(",")
+        for n in args.vehicles
+        for seed in args.seeds
+    ]
+    with ProcessPoolExecutor(args.jobs) as pool:
+        records = list(pool.map(job, jobs))
+    report = {
+        "benchmark": "heterogeneous",
+        "types": list(TYPES),
+        "mix": [{"requires": list(c.requires), "share": c.share} for c in MIX],
+        "baseline": "batch: per type, the p-median of the targets seen so far that needed it",
+        "gap": "exact expected cost of objective (11) / optimum - 1",
+        **summarise(records),
+        "records": records,
+        "seconds": time.perf_counter() - started,
+    }
+    print(json.dumps(report, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,68 @@
+"""``bench/heterogeneous.py`` prints one JSON document whose summary is that of its
+records, prices the per-type optima at the optimum by objective (11), and refuses bad
+options before any work."""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RULES = ("probe", "paper", "consolidating")
+
+
+def run(tmp_path: Path, *options: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "heterogeneous.py"), *options],
+        capture_output=True, text=True, timeout=600, cwd=tmp_path,
+    )  # fmt: skip
+
+
+def test_heterogeneous_report_is_its_records(tmp_path: Path) -> None:
+    done = run(
+        tmp_path, "--nets", "grid", "--vehicles", "4", "--seeds", "0,1", "--targets", "1000",
+        "--jobs", "1",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    records = report["records"]
+    assert [(r["network"], r["vehicles"], r["seed"]) for r in records] == [
+        ("grid", 4, 0),
+        ("grid", 4, 1),
+    ]
+    labels = ["300", "1000"]
+    table = report["median_over_seeds"]["grid/4"]
+    for r in records:
+        assert abs(r["gap_at_optimum"]) < 1e-9  # the decomposition is objective (11)
+        assert list(r["batch"]) == labels
+        for rule in RULES:
+            for scenario in ("cold", "warm"):
+                gaps = r[rule][scenario]
+                assert list(gaps) == labels
+                assert all(math.isfinite(g) and g > -0.5 for g in gaps.values())
+    for label in labels:
+        assert table["batch"][label] == statistics.median(r["batch"][label] for r in records)
+        for rule in RULES:
+            assert table[rule]["cold"][label] == statistics.median(
+                r[rule]["cold"][label] for r in records
+            )
+    for rule in RULES:
+        worst_warm = max(table[rule]["warm"].values())
+        assert report["goals"][rule]["warm_every"] == [worst_warm, "grid/4", worst_warm <= 0.05]
+        assert report["goals"][rule]["cold_3000"] is None  # no checkpoint at 3,000 here
+
+
+def test_heterogeneous_refuses_bad_options_before_any_work(tmp_path: Path) -> None:
+    for options, message in (
+        (["--nets", "nosuch"], "'nosuch' is neither a known network"),
+        (["--targets", "10"], "--targets must be at least 300 and --jobs at least 1"),
+        (["--vehicles", "1"], "--vehicles: at least 2 (one of each type)"),
+    ):
+        done = run(tmp_path, *options)
+        assert done.returncode == 2, (options, done.stderr)
+        assert message in done.stderr.strip().splitlines()[-1]
+        assert done.stdout == ""
