@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-RULES = ("probe", "paper", "consolidating")
+RULES = ("probe", "paper", "consolidating", "per_type")
 
 
 def run(tmp_path: Path, *options: str) -> subprocess.CompletedProcess[str]:
