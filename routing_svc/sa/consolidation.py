@@ -612,9 +612,10 @@ def consolidate(
     return taken(gain, standard_error, fresh_before)
 
 
-ConsolidationKey = tuple[int, int]
-"""Which due consolidation a job is for: the epoch and the target count it was due at
-(both only grow, so a key names one consolidation of a fleet's life)."""
+ConsolidationKey = tuple[int, int, int]
+"""Which due consolidation a job is for: the first vehicle of the group it moves (0 for
+the whole fleet), the group's epoch and the count it was due at (both only grow, so a
+key names one consolidation of a fleet's life)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -20,7 +20,9 @@ position) apart from whose *reference* moves; :class:`LearningVehicles`
 chooses whether the mover is the closest reference of all vehicles (the
 paper's) or of the available ones. Under ``consolidating`` the held step acts
 on that mover's reference and consolidations on all references, as before
-(references are where vehicles wait when idle, busy or not).
+(references are where vehicles wait when idle, busy or not); a fleet of several
+types consolidates each type's references on the targets that needed one vehicle
+of that type (:attr:`Fleet.learns_per_type`).
 
 Three rules (:class:`Rule`): the paper's step alone; the paper's step with the
 backward probe; and ``consolidating``, the paper's step held at junctions
@@ -233,10 +235,14 @@ class FleetState(Generic[P]):
     of an edge, see :meth:`DirectedSpace.entry`), or ``None`` when unknown; kept only
     with :attr:`FleetConfig.probe`. Empty means all unknown."""
     learning: Learning[P] | None = None
-    """The ``consolidating`` rule's own state (``None`` for the other rules)."""
+    """The ``consolidating`` rule's own state for the whole fleet (``None`` for the other
+    rules, and for a fleet that learns per type)."""
     vehicle_states: list[VehicleState[P]] = field(default_factory=list)
     """Per vehicle, its live state (:class:`~routing_svc.sa.live.VehicleState`); empty
     means every vehicle is available at its reference. Replaced, never changed in place."""
+    type_learning: dict[str, Learning[P]] = field(default_factory=dict)
+    """The ``consolidating`` rule's state per vehicle type, for a fleet that learns per
+    type (:attr:`Fleet.learns_per_type`); empty otherwise."""
 
 
 @dataclass(slots=True)
@@ -270,6 +276,13 @@ class Learning(Generic[P]):
     run: ShiftRun = NO_SHIFT_RUN
     """The blocks in a row that exceeded the shift ratio: their costs' sum, their
     squares' sum and their size (:meth:`ConsolidationPolicy.starts_epoch`)."""
+    vehicles: tuple[int, ...] | None = None
+    """The vehicles (fleet indices) this state learns for: ``None``, the whole fleet
+    (its counts are the fleet's targets); else one type's vehicles (a type group:
+    :attr:`FleetState.type_learning`), whose counts are :attr:`seen`. ``holds`` and
+    ``anchor`` are in this order."""
+    seen: int = 0
+    """A type group's targets: those that needed exactly one vehicle, of its type."""
 
 
 class Dispatch(NamedTuple, Generic[P]):
@@ -307,6 +320,9 @@ class Outcome(NamedTuple, Generic[P]):
     order; the mover among them made no forward step (:attr:`FleetConfig.probe`)."""
     consolidation: Consolidation[P] | None = None
     """The consolidation this target triggered, applied after its step (``consolidating``)."""
+    consolidated: tuple[str, ...] = ()
+    """The ids of the vehicles whose references :attr:`consolidation` gives, in its
+    order: the whole fleet's, or one type's (:attr:`Fleet.learns_per_type`)."""
 
 
 @dataclass
@@ -337,6 +353,7 @@ class Fleet(Generic[P]):
     _ids: tuple[str, ...] = field(init=False, repr=False)
     _any_one: Requirement = field(init=False, repr=False)
     _identical: bool = field(init=False, repr=False)
+    _type_groups: dict[str, tuple[int, ...]] | None = field(init=False, repr=False)
     _probe_cache: _ProbeCache[P] | None = field(init=False, repr=False, default=None)
     _compiled: tuple[object, FleetConfig, SingleTargetServing[P] | None] | None = field(
         init=False, repr=False, default=None
@@ -384,16 +401,58 @@ class Fleet(Generic[P]):
         self._identical = len(set(self._types)) == 1 and bool(
             np.all(self._speeds == self._speeds[0])
         )
+        self._type_groups = self._groups_by_type()
         policy = self.config.consolidation
-        if policy is not None and self.state.learning is None:
-            self.state.learning = Learning(
-                holds=[None] * n,
-                anchor=list(self.state.positions),
-                reservoir=deque(maxlen=policy.reservoir),
-                epoch=self.state.targets,
-                next_consolidation=self.state.targets + policy.first,
-                accepted_at=self.state.targets,
-            )
+        if policy is None:
+            return
+        if self._type_groups is None:
+            if self.state.learning is None:
+                self.state.learning = self._new_learning(policy, None, self.state.targets)
+        elif not self.state.type_learning:
+            self.state.type_learning = {
+                kind: self._new_learning(policy, members, 0)
+                for kind, members in self._type_groups.items()
+            }
+
+    def _new_learning(
+        self, policy: ConsolidationPolicy, members: tuple[int, ...] | None, now: int
+    ) -> Learning[P]:
+        """A fresh learning state for ``members`` (``None``: the whole fleet) at count ``now``."""
+        indices = range(len(self.vehicles)) if members is None else members
+        return Learning(
+            holds=[None] * len(indices),
+            anchor=[self.state.positions[i] for i in indices],
+            reservoir=deque(maxlen=policy.reservoir),
+            epoch=now,
+            next_consolidation=now + policy.first,
+            accepted_at=now,
+            vehicles=members,
+        )
+
+    def _groups_by_type(self) -> dict[str, tuple[int, ...]] | None:
+        """Each type's vehicles when the fleet learns per type (:attr:`learns_per_type`),
+        else ``None``."""
+        if self.config.consolidation is None or self._identical or self.config.stands is not None:
+            return None
+        groups: dict[str, list[int]] = {}
+        for i, kind in enumerate(self._types):
+            groups.setdefault(kind, []).append(i)
+        if any(len({float(self._speeds[i]) for i in members}) > 1 for members in groups.values()):
+            return None
+        return {kind: tuple(members) for kind, members in sorted(groups.items())}
+
+    @property
+    def learns_per_type(self) -> bool:
+        """Whether the ``consolidating`` rule runs once per vehicle type.
+
+        Objective (11) of targets that each need one vehicle of one type is a sum of
+        one p-median per type, so each type's vehicles consolidate on the recent
+        targets that needed their type, on their own clock (:attr:`Learning.seen`). A
+        fleet learns so under ``consolidating`` when it has several types (or speeds),
+        each type's vehicles share one speed, and it has no stands (their capacities
+        are shared between types); other targets make held steps only.
+        """
+        return self._type_groups is not None
 
     @classmethod
     def create(
@@ -532,14 +591,13 @@ class Fleet(Generic[P]):
         if not _offers(type(self.space), "cost_matrix"):
             raise InvalidInput("posts need a space with a cost matrix")
         space = cast(SampleSpace[P], self.space)
-        learning = self.state.learning
         return fleet_posts(
             space.cost_matrix,
             references=self.state.positions,
             speeds=self._speeds,
             types=self._types,
             states=self.state.vehicle_states,
-            sample=list(learning.reservoir) if learning is not None else [],
+            sample=[z for learning in self._learnings() for z in learning.reservoir],
             power=self.config.objective.power,
         )
 
@@ -563,11 +621,8 @@ class Fleet(Generic[P]):
         ``solved``: a consolidation solved away from the fleet (:meth:`consolidation_job`),
         applied (and returned in the outcome) if it is still the due one, else dropped.
         """
-        learning = self.state.learning
-        if learning is not None and self.config.consolidation is not None:
-            return self._observe_held(
-                learning, self.config.consolidation, target, requires, solved=solved
-            )
+        if self.config.consolidation is not None:
+            return self._observe_held(self.config.consolidation, target, requires, solved=solved)
         if not requires and self.config.annealing is None and self.at_rest():
             serving = self._serving()
             if serving is not None:
@@ -610,7 +665,6 @@ class Fleet(Generic[P]):
 
     def _observe_held(
         self,
-        learning: Learning[P],
         policy: ConsolidationPolicy,
         target: P,
         requires: Sequence[str] | None,
@@ -625,7 +679,9 @@ class Fleet(Generic[P]):
         (:attr:`ConsolidationPolicy.unfitted_confidence`) or unless
         :func:`~routing_svc.sa.consolidation.move_pays` on the reservoir), then the shift
         test and, when due, a consolidation (see :meth:`_learn_from` for ``recorded``,
-        ``replaying`` and ``solved``)."""
+        ``replaying`` and ``solved``). The mover's hold and checks are its group's
+        (:attr:`learns_per_type`); the target feeds the group it needs
+        (:meth:`_fed_by`)."""
         dispatch, found = self._search(target, requires)
         state = self.state
         mover = found.mover
@@ -637,6 +693,7 @@ class Fleet(Generic[P]):
         space = self.space
         if _has_junctions(type(space)):
             assert self.config.window is not None
+            keeper, local = self._learning_of(mover)
             new, moved, hold = held_step(
                 cast(JunctionSpace[P], space),
                 old,
@@ -644,22 +701,22 @@ class Fleet(Generic[P]):
                 found.route,
                 amount=amount,
                 path_cost=found.mover_cost,
-                hold=learning.holds[mover],
+                hold=keeper.holds[local],
                 window=self.config.window,
             )
             if (
                 moved > 0.0
                 and self._consolidates()
                 and (
-                    (policy.unfitted_confidence and learning.fitted == 0)
+                    (policy.unfitted_confidence and keeper.fitted == 0)
                     or (
                         policy.checked_moves
                         and not move_pays(
                             cast(SampleSpace[P], space),
-                            state.positions,
-                            mover,
+                            self._group_positions(keeper),
+                            local,
                             new,
-                            list(learning.reservoir),
+                            list(keeper.reservoir),
                             power=self.config.objective.power,
                             speed=float(self._speeds[mover]),
                         )
@@ -667,7 +724,7 @@ class Fleet(Generic[P]):
                 )
             ):
                 new, moved, hold = old, 0.0, None
-            learning.holds[mover] = hold
+            keeper.holds[local] = hold
         else:
             new = space.advance(old, target, found.route, amount) if amount > 0.0 else old
             moved = amount
@@ -676,17 +733,67 @@ class Fleet(Generic[P]):
         state.updates[mover] += 1
         state.targets += 1
         consolidation = None
-        if not requires and self._consolidates():
+        fed = self._fed_by(requires)
+        if fed is not None and self._consolidates():
+            if fed.vehicles is not None:
+                fed.seen += 1
             consolidation = self._learn_from(
-                learning, policy, target, dispatch.objective, recorded, replaying, solved
+                fed, policy, target, dispatch.objective, recorded, replaying, solved
             )
         elif recorded is not None:
             raise ReplayMismatch("a consolidation was recorded for a target that makes none")
-        return Outcome(index, dispatch, gamma, moved, 0.0, old, new, (), consolidation)
+        consolidated = () if fed is None or consolidation is None else self._group_ids(fed)
+        return Outcome(
+            index, dispatch, gamma, moved, 0.0, old, new, (), consolidation, consolidated
+        )
 
     def _consolidates(self) -> bool:
-        """Whether this fleet can consolidate: one type, one speed, a space that can."""
-        return self._identical and _samples(type(self.space))
+        """Whether this fleet can consolidate: a space that can, and one type and one
+        speed, or one speed per type (:attr:`learns_per_type`)."""
+        return (self._identical or self._type_groups is not None) and _samples(type(self.space))
+
+    def _learnings(self) -> list[Learning[P]]:
+        """The ``consolidating`` rule's states: the whole fleet's, or one per type."""
+        if self.state.learning is not None:
+            return [self.state.learning]
+        return list(self.state.type_learning.values())
+
+    def _fed_by(self, requires: Sequence[str] | None) -> Learning[P] | None:
+        """The learning state a target feeds: the whole fleet's for a target that needs
+        any one vehicle; a type's for one that needs exactly one vehicle, of that type
+        (:attr:`learns_per_type`); none for the others."""
+        if self._type_groups is None:
+            return None if requires else self.state.learning
+        if requires is not None and len(requires) == 1:
+            return self.state.type_learning.get(requires[0])
+        return None
+
+    def _learning_of(self, vehicle: int) -> tuple[Learning[P], int]:
+        """The learning state that holds ``vehicle``, and its index there."""
+        if self.state.learning is not None:
+            return self.state.learning, vehicle
+        kept = self.state.type_learning[self._types[vehicle]]
+        assert kept.vehicles is not None
+        return kept, kept.vehicles.index(vehicle)
+
+    def _members(self, learning: Learning[P]) -> Sequence[int]:
+        """The fleet indices of the vehicles ``learning`` learns for."""
+        return range(len(self.vehicles)) if learning.vehicles is None else learning.vehicles
+
+    def _group_positions(self, learning: Learning[P]) -> list[P]:
+        """The references of the vehicles ``learning`` learns for, in its order."""
+        positions = self.state.positions
+        if learning.vehicles is None:
+            return positions
+        return [positions[i] for i in learning.vehicles]
+
+    def _group_ids(self, learning: Learning[P]) -> tuple[str, ...]:
+        """The ids of the vehicles ``learning`` learns for, in its order."""
+        return tuple(self._ids[i] for i in self._members(learning))
+
+    def _clock(self, learning: Learning[P]) -> int:
+        """The target count ``learning`` schedules by: the fleet's, or its group's."""
+        return self.state.targets if learning.vehicles is None else learning.seen
 
     def _learn_from(
         self,
@@ -705,6 +812,7 @@ class Fleet(Generic[P]):
         ``solved`` when it answers this due one (its key), else none while
         :attr:`defer_consolidations`, else solved here."""
         state = self.state
+        now = self._clock(learning)
         learning.reservoir.append(target)
         learning.block_cost += cost
         learning.block_squares += cost * cost
@@ -720,12 +828,12 @@ class Fleet(Generic[P]):
                 recent = list(learning.reservoir)[-policy.block :]
                 learning.reservoir.clear()
                 learning.reservoir.extend(recent)
-                learning.epoch = state.targets
-                learning.next_consolidation = state.targets + policy.first
+                learning.epoch = now
+                learning.next_consolidation = now + policy.first
                 learning.baseline = None
                 learning.fitted = 0
             learning.block_cost, learning.block_squares, learning.block_size = 0.0, 0.0, 0
-        if state.targets < learning.next_consolidation:
+        if now < learning.next_consolidation:
             if recorded is not None:
                 raise ReplayMismatch("a consolidation was recorded where none was due")
             return None
@@ -733,28 +841,29 @@ class Fleet(Generic[P]):
             if recorded is None:  # solved away from the fleet, applied at a later target
                 return None
             done = recorded
-        elif solved is not None and solved[0] == _key(learning):
+        elif solved is not None and solved[0] == self._key(learning):
             done = solved[1]
         elif self.defer_consolidations:
             return None
         else:
-            job = self.consolidation_job()
-            assert job is not None
+            job = self._job(learning)
             done = job.solve()
-        if len(done.positions) != len(self.vehicles) or len(done.updates) != len(self.vehicles):
+        members = self._members(learning)
+        if len(done.positions) != len(members) or len(done.updates) != len(members):
             raise ReplayMismatch("a recorded consolidation does not match the fleet's vehicles")
         if done.accepted:
-            state.positions[:] = done.positions
-            state.updates[:] = done.updates
+            for i, position, updates in zip(members, done.positions, done.updates, strict=True):
+                state.positions[i] = position
+                state.updates[i] = updates
             learning.anchor = list(done.positions)
-            learning.holds = [None] * len(self.vehicles)
-            learning.accepted_at = state.targets
+            learning.holds = [None] * len(members)
+            learning.accepted_at = now
             learning.fitted = done.sample
             if policy.hastens(done):
-                learning.hastened_at = state.targets
+                learning.hastened_at = now
         learning.baseline = done.fresh_baseline if policy.fresh_baseline else done.baseline
         learning.next_consolidation = policy.next_after(
-            now=state.targets,
+            now=now,
             epoch=learning.epoch,
             accepted_at=learning.accepted_at,
             hastened_at=learning.hastened_at,
@@ -762,54 +871,69 @@ class Fleet(Generic[P]):
         return done
 
     def due_consolidation(self) -> ConsolidationKey | None:
-        """The key of the consolidation due now, if one is (:meth:`consolidation_job`)."""
-        learning = self.state.learning
-        if (
-            learning is None
-            or self.config.consolidation is None
-            or not self._consolidates()
-            or self.state.targets < learning.next_consolidation
-        ):
+        """The key of the consolidation due now, if one is (:meth:`consolidation_job`);
+        of a fleet that learns per type, the first type's in name order."""
+        due = self._due_learning()
+        return None if due is None else self._key(due)
+
+    def _due_learning(self) -> Learning[P] | None:
+        """The learning state whose consolidation is due now, if any."""
+        if self.config.consolidation is None or not self._consolidates():
             return None
-        return _key(learning)
+        for learning in self._learnings():
+            if self._clock(learning) >= learning.next_consolidation:
+                return learning
+        return None
 
     def scheduled_consolidation(self) -> tuple[int, int] | None:
-        """The target counts at which the next scheduled consolidation falls due and by
-        which, solved away from the fleet, it must be applied
+        """The fleet's target counts at which the next scheduled consolidation falls due
+        and by which, solved away from the fleet, it must be applied
         (:meth:`ConsolidationPolicy.apply_by`); ``None`` for a fleet that does not
-        consolidate."""
-        learning, policy = self.state.learning, self.config.consolidation
-        if learning is None or policy is None or not self._consolidates():
+        consolidate. A type's counts advance with its own targets only, so for a fleet
+        that learns per type these are the earliest counts at which any type's could."""
+        policy = self.config.consolidation
+        if policy is None or not self._consolidates():
             return None
+        scheduled = [self._scheduled(learning, policy) for learning in self._learnings()]
+        return min(due for due, _ in scheduled), min(by for _, by in scheduled)
+
+    def _scheduled(self, learning: Learning[P], policy: ConsolidationPolicy) -> tuple[int, int]:
+        """:meth:`scheduled_consolidation` of one learning state, in the fleet's counts."""
+        ahead = self.state.targets - self._clock(learning)
         due = learning.next_consolidation
-        return due, policy.apply_by(
+        apply_by = policy.apply_by(
             due=due,
             epoch=learning.epoch,
             accepted_at=learning.accepted_at,
             hastened_at=learning.hastened_at,
         )
+        return due + ahead, apply_by + ahead
 
     def consolidation_job(self) -> ConsolidationJob[P] | None:
         """The due consolidation's inputs, copied (``None`` when none is due)."""
-        key = self.due_consolidation()
-        scheduled = self.scheduled_consolidation()
-        learning, policy, state = self.state.learning, self.config.consolidation, self.state
-        if key is None or scheduled is None or learning is None or policy is None:
-            return None
+        due = self._due_learning()
+        return None if due is None else self._job(due)
+
+    def _job(self, learning: Learning[P]) -> ConsolidationJob[P]:
+        """The inputs of ``learning``'s consolidation, copied; its ``apply_by`` in the
+        fleet's counts."""
+        policy, state = self.config.consolidation, self.state
+        assert policy is not None
+        members = self._members(learning)
         return ConsolidationJob(
-            key=key,
-            apply_by=scheduled[1],
+            key=self._key(learning),
+            apply_by=self._scheduled(learning, policy)[1],
             space=cast(SampleSpace[P], self.space),
-            positions=tuple(state.positions),
+            positions=tuple(self._group_positions(learning)),
             anchor=tuple(learning.anchor),
             reservoir=tuple(learning.reservoir),
             power=self.config.objective.power,
-            speed=float(self._speeds[0]),
+            speed=float(self._speeds[members[0]]),
             confidence=policy.confidence_at(
                 due=learning.next_consolidation, epoch=learning.epoch, fitted=learning.fitted > 0
             ),
-            updates=tuple(state.updates),
-            fresh=state.targets - learning.accepted_at,
+            updates=tuple(state.updates[i] for i in members),
+            fresh=self._clock(learning) - learning.accepted_at,
             folds=policy.folds,
             refit=policy.refit is not None
             and learning.fitted > 0
@@ -818,6 +942,12 @@ class Fleet(Generic[P]):
             stands=self.config.stands,
             shakes=policy.shakes,
         )
+
+    def _key(self, learning: Learning[P]) -> ConsolidationKey:
+        """The key of ``learning``'s consolidation due now (or next): its first vehicle,
+        its epoch and the count it falls due at."""
+        first = 0 if learning.vehicles is None else learning.vehicles[0]
+        return (first, learning.epoch, learning.next_consolidation)
 
     def replay_observe(
         self, target: P, requires: Sequence[str] | None, recorded: Consolidation[P] | None
@@ -830,14 +960,12 @@ class Fleet(Generic[P]):
         ReplayMismatch
             A consolidation recorded where the fleet makes none.
         """
-        learning, policy = self.state.learning, self.config.consolidation
-        if learning is None or policy is None:
+        policy = self.config.consolidation
+        if policy is None:
             if recorded is not None:
                 raise ReplayMismatch("a consolidation was recorded for a fleet that makes none")
             return self.observe(target, requires)
-        return self._observe_held(
-            learning, policy, target, requires, recorded=recorded, replaying=True
-        )
+        return self._observe_held(policy, target, requires, recorded=recorded, replaying=True)
 
     @property
     def compiled_update(self) -> bool:
@@ -993,6 +1121,16 @@ class Fleet(Generic[P]):
             "targets": self.state.targets,
             "entries": [None if e is None else self.space.encode(e) for e in self.state.entries],
             **({} if self.state.learning is None else {"learning": self._learning_dict()}),
+            **(
+                {
+                    "type_learning": {
+                        kind: self._learning_dict(learning)
+                        for kind, learning in self.state.type_learning.items()
+                    }
+                }
+                if self.state.type_learning
+                else {}
+            ),
             **({} if self._states_default() else {"vehicle_states": self._states_list()}),
         }
 
@@ -1010,8 +1148,11 @@ class Fleet(Generic[P]):
             for s in self.state.vehicle_states
         ]
 
-    def _learning_dict(self) -> dict[str, Any]:
-        learning, policy = self.state.learning, self.config.consolidation
+    def _learning_dict(self, learning: Learning[P] | None = None) -> dict[str, Any]:
+        """One learning state as JSON (the whole fleet's by default); a type's also
+        has its count ``seen``."""
+        learning = self.state.learning if learning is None else learning
+        policy = self.config.consolidation
         assert learning is not None and policy is not None
         encode = self.space.encode
         return {
@@ -1038,14 +1179,18 @@ class Fleet(Generic[P]):
                 else {}
             ),
             **({"hastened_at": learning.hastened_at} if policy.hasten is not None else {}),
+            **({} if learning.vehicles is None else {"seen": learning.seen}),
         }
 
-    def _learning_from(self, data: dict[str, Any]) -> Learning[P]:
+    def _learning_from(
+        self, data: dict[str, Any], members: tuple[int, ...] | None = None
+    ) -> Learning[P]:
+        """:meth:`_learning_dict` read back, for ``members`` (``None``: the whole fleet)."""
         policy = self.config.consolidation
         if policy is None:
             raise InvalidInput("snapshot has learning state for a fleet without the rule")
         decode = self.space.decode
-        n = len(self.vehicles)
+        n = len(self.vehicles) if members is None else len(members)
         holds: list[Hold[P] | None] = [
             None if h is None else Hold(decode(h["exit"]), float(h["pressure"]))
             for h in data["holds"]
@@ -1068,6 +1213,8 @@ class Fleet(Generic[P]):
             run=_run_of(data.get("run", [0.0, 0.0, 0])),
             fitted=int(data.get("fitted", 0)),
             hastened_at=int(data.get("hastened_at", 0)),
+            vehicles=members,
+            seen=int(data.get("seen", 0)),
         )
 
     def restore(self, data: dict[str, Any]) -> None:
@@ -1081,10 +1228,19 @@ class Fleet(Generic[P]):
         if len(entries) != len(positions):
             raise InvalidInput("snapshot does not match the fleet's vehicles")
         learning = None
-        if self.config.consolidation is not None:
+        type_learning: dict[str, Learning[P]] = {}
+        groups = self._type_groups
+        if self.config.consolidation is not None and groups is None:
             if "learning" not in data:
                 raise InvalidInput("snapshot lacks the consolidating rule's state")
             learning = self._learning_from(data["learning"])
+        elif self.config.consolidation is not None and groups is not None:
+            stored = data.get("type_learning")
+            if not isinstance(stored, dict) or sorted(stored) != list(groups):
+                raise InvalidInput("snapshot lacks the consolidating rule's state per type")
+            type_learning = {
+                kind: self._learning_from(stored[kind], members) for kind, members in groups.items()
+            }
         states: list[VehicleState[P]] = [
             VehicleState(
                 Status(s["status"]),
@@ -1102,6 +1258,7 @@ class Fleet(Generic[P]):
             entries,
             learning,
             states or [VehicleState() for _ in positions],
+            type_learning,
         )
 
     def vehicle_index(self, vehicle_id: str) -> int:
@@ -1155,11 +1312,6 @@ def _is_directed(kind: type) -> bool:
 
 Solved = tuple[ConsolidationKey, Consolidation[P]]
 """A consolidation solved away from the fleet, with the key of the job it answers."""
-
-
-def _key(learning: Learning[Any]) -> ConsolidationKey:
-    """The key of the consolidation due now (or next)."""
-    return (learning.epoch, learning.next_consolidation)
 
 
 def _run_of(data: Any) -> ShiftRun:

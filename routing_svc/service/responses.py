@@ -347,7 +347,10 @@ class TargetResult(Answer):
     """A served target: who served it, who moved, by how much and where to."""
 
     consolidated: dict[str, Any] | None = Field(
-        default=None, description="Present when the target started a consolidation."
+        default=None,
+        description="Present when the target started a consolidation: its `positions` "
+        "are the new references of the vehicles it moved, all of the fleet's in id order, "
+        "or, for a fleet that learns per type, those of `vehicles` (the target's type).",
     )
     backed_off: list[BackedOff]
     cost: Number

@@ -155,7 +155,10 @@ class FleetRuntime:
             ],
             consolidated=None
             if outcome.consolidation is None
-            else outcome.consolidation.to_dict(self.base_space.encode),
+            else {
+                **outcome.consolidation.to_dict(self.base_space.encode),
+                **({"vehicles": list(outcome.consolidated)} if self.fleet.learns_per_type else {}),
+            },
             dispatch=None if legacy or d.sent is None else d.sent.to_dict(),
         ).to_json()
         payload = target_payload(self.base_space.encode(target), required)

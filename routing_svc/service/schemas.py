@@ -169,11 +169,12 @@ class FleetSpec(Strict):
             Literal["consolidating", "probe", "paper"],
             Field(
                 description="Learning rule: 'consolidating' (held steps of eq. (10) and "
-                "consolidations of recent targets; the default for identical vehicles), "
-                "'probe' (eq. (10) with the backward probe; the default for vehicles of "
-                "several types or speeds) or 'paper' (eq. (10) alone). Without a rule, a "
-                "'probe' value or annealing chooses the probe rule (a probe of 0: the "
-                "paper's), as before.",
+                "consolidations of recent targets; the default when each type's vehicles "
+                "share one speed, and, with several types, there are no stands: then each "
+                "type consolidates on the targets that need one vehicle of it), 'probe' "
+                "(eq. (10) with the backward probe; the default for the other fleets) or "
+                "'paper' (eq. (10) alone). Without a rule, a 'probe' value or annealing "
+                "chooses the probe rule (a probe of 0: the paper's), as before.",
             ),
         ]
         | None
@@ -237,17 +238,22 @@ class FleetSpec(Strict):
 
     def learning_rule(self) -> str:
         """The rule asked for: ``rule``; else the probe rule when a probe window or
-        annealing is given (the paper's for a window of 0); else the default for
-        identical vehicles (one type, one speed), whose fleets consolidate, and the
-        probe rule for the others, which cannot."""
+        annealing is given (the paper's for a window of 0); else the default for a
+        fleet that can consolidate (one speed per type; several types without stands,
+        :attr:`~routing_svc.sa.fleet.Fleet.learns_per_type`), and the probe rule for
+        the others."""
         if self.rule is not None:
             return self.rule
         if self.probe is not None:
             return "probe" if self.probe > 0.0 else "paper"
         if self.annealing is not None:
             return "probe"
-        identical = len({(v.type, v.speed) for v in self.vehicles}) == 1
-        return DEFAULT_RULE.value if identical else "probe"
+        speeds: dict[str, set[float]] = {}
+        for v in self.vehicles:
+            speeds.setdefault(v.type, set()).add(v.speed)
+        one_speed_per_type = all(len(s) == 1 for s in speeds.values())
+        consolidates = one_speed_per_type and (len(speeds) == 1 or self.stands is None)
+        return DEFAULT_RULE.value if consolidates else "probe"
 
     @field_validator("vehicles")
     @classmethod

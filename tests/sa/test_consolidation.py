@@ -36,6 +36,7 @@ from routing_svc.sa import (
     learning_config,
 )
 from routing_svc.sa.consolidation import consolidate, searched
+from routing_svc.sa.fleet import Learning
 from routing_svc.sa.held_step import held_step
 from routing_svc.sa.interchange import fast_interchange
 from routing_svc.sa.requirements import build_requirement
@@ -1491,13 +1492,28 @@ def test_far_targets_in_blocks_in_a_row_start_an_epoch_together(space: RoadSpace
     assert alone.state.learning is not None and alone.state.learning.epoch == 2250
 
 
-def test_mixed_types_or_speeds_never_consolidate_but_hold(space: RoadSpace) -> None:
+def _hold_keeper(fleet: Fleet[Any], vehicle: int) -> tuple[Learning[Any], int]:
+    """The learning state that keeps ``vehicle``'s hold, and its index there."""
+    if fleet.state.learning is not None:
+        return fleet.state.learning, vehicle
+    kept = fleet.state.type_learning[fleet.vehicles[vehicle].type]
+    assert kept.vehicles is not None
+    return kept, kept.vehicles.index(vehicle)
+
+
+def test_targets_for_any_vehicle_of_mixed_types_or_speeds_never_consolidate_but_hold(
+    space: RoadSpace,
+) -> None:
     _, stream = demand_stream(10, 600)
-    for vehicles in (
-        [Vehicle("a", "car"), Vehicle("b", "car"), Vehicle("c", "van"), Vehicle("d", "van")],
-        [Vehicle("a"), Vehicle("b"), Vehicle("c", speed=1.5), Vehicle("d", speed=1.5)],
+    for vehicles, per_type in (
+        (
+            [Vehicle("a", "car"), Vehicle("b", "car"), Vehicle("c", "van"), Vehicle("d", "van")],
+            True,
+        ),
+        ([Vehicle("a"), Vehicle("b"), Vehicle("c", speed=1.5), Vehicle("d", speed=1.5)], False),
     ):
         fleet = consolidating_fleet(space, vehicles=vehicles)
+        assert fleet.learns_per_type is per_type
         window = fleet.config.window
         assert window is not None and window > 0
         types = tuple(v.type for v in fleet.vehicles)
@@ -1505,27 +1521,27 @@ def test_mixed_types_or_speeds_never_consolidate_but_hold(space: RoadSpace) -> N
         anyone, _ = build_requirement(types, None)
         held = 0
         for z in stream:
-            state, learning = fleet.state, fleet.state.learning
-            assert learning is not None
+            state = fleet.state
             found = space.assign(z, state.positions, speeds, anyone)
             mover = found.mover
+            keeper, local = _hold_keeper(fleet, mover)
             amount = fleet.config.objective.step_amount(
                 gamma=fleet.step_size(mover), path_cost=found.mover_cost, speed=speeds[mover]
             )
             expected = held_step(
                 space, state.positions[mover], z, found.route, amount=amount,
-                path_cost=found.mover_cost, hold=learning.holds[mover], window=window,
+                path_cost=found.mover_cost, hold=keeper.holds[local], window=window,
             )  # fmt: skip
             out = fleet.observe(z)
             assert out.consolidation is None
             assert out.dispatch.moved == fleet.vehicles[mover].id
             assert (out.new_position, out.moved_by) == expected[:2]
-            assert learning.holds[mover] == expected[2]
+            assert keeper.holds[local] == expected[2]
             held += expected[2] is not None and out.moved_by == 0.0 and amount > 0.0
         assert held > 0  # some steps were held until the pressure reached the window
-        assert fleet.state.learning is not None
-        assert len(fleet.state.learning.reservoir) == 0
-        assert fleet.state.learning.baseline is None
+        keepers = [fleet.state.learning] if not per_type else fleet.state.type_learning.values()
+        for kept in keepers:
+            assert kept is not None and len(kept.reservoir) == 0 and kept.baseline is None
 
 
 def test_coverage_objective_consolidates_too(space: RoadSpace) -> None:
@@ -1772,7 +1788,7 @@ def test_a_deferred_fleet_applies_a_consolidation_solved_away_from_it_later(
         assert deferred.observe(z).consolidation is None
     key = deferred.due_consolidation()
     job = deferred.consolidation_job()
-    assert job is not None and key == job.key == (0, k + 1)
+    assert job is not None and key == job.key == (0, 0, k + 1)
     # the job holds what the inline fleet solved at the same target
     assert job.reservoir == tuple(stream[: k + 1])
     assert list(job.positions) == deferred.state.positions
@@ -1789,7 +1805,7 @@ def test_a_deferred_fleet_applies_a_consolidation_solved_away_from_it_later(
         assert deferred.due_consolidation() == key
         recorded.append(None)
     # an answer to another job is dropped
-    stale = deferred.observe(stream[k + 1 + lag], solved=((0, k), done))
+    stale = deferred.observe(stream[k + 1 + lag], solved=((0, 0, k), done))
     assert stale.consolidation is None and deferred.due_consolidation() == key
     recorded.append(None)
     applied = deferred.observe(stream[k + 2 + lag], solved=(key, done))
@@ -1830,7 +1846,7 @@ def test_a_shift_makes_a_pending_consolidation_stale(space: RoadSpace) -> None:
     given.observe(stream[0])
     twin.observe(stream[0])
     job = given.consolidation_job()
-    assert job is not None and job.key == (0, due)
+    assert job is not None and job.key == (0, 0, due)
     done = job.solve()
     for z in stream[1:]:  # the solve is slow: the demand moves before it is applied
         given.observe(z)

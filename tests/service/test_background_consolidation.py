@@ -182,16 +182,16 @@ def test_a_solve_that_failed_in_its_worker_is_solved_on_the_write_path() -> None
         fleet.observe(target)
     first = fleet.consolidation_job()
     # due at the 250th target, the epoch's first: the next target applies it
-    assert first is not None and first.key == (0, FIRST) and first.apply_by == FIRST
+    assert first is not None and first.key == (0, 0, FIRST) and first.apply_by == FIRST
     fleet.observe(stream[FIRST], solved=(first.key, first.solve()))
     for target in stream[FIRST + 1 :]:
         if fleet.due_consolidation() is not None:
             break
         fleet.observe(target)
     job = fleet.consolidation_job()
-    assert job is not None and job.key[1] == fleet.state.targets
+    assert job is not None and job.key[2] == fleet.state.targets
     # the next ones: applied by the end of the period after them at the latest
-    assert job.apply_by == job.key[1] + FIRST
+    assert job.apply_by == job.key[2] + FIRST
     answer: Future[Any] = Future()
     pending = PendingConsolidation(job, answer)
     assert pending.solved(job.apply_by - 1) is None  # not finished, not late: the target goes on

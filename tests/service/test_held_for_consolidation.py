@@ -63,7 +63,7 @@ def second_due(
         assert ("consolidated" in r.json()) is (k == FIRST + 1)  # it applied the first
         if len(solver.jobs) == 2:
             job, later = solver.jobs[1]
-            assert job.key[1] == k  # due at the k-th target
+            assert job.key[2] == k  # due at the k-th target
             assert job.apply_by > k  # applied by the period after it
             return job, later
     raise AssertionError("no second consolidation fell due")
@@ -89,7 +89,7 @@ def test_a_fleet_waiting_for_its_consolidation_holds_only_its_own_writes(
     stream = hotspot_stream(4 * FIRST)
     job, answer = second_due(client, solver, "waits", stream)
     apply_by = job.apply_by
-    post_batches(client, "waits", stream[job.key[1] : apply_by])  # up to apply_by: not held
+    post_batches(client, "waits", stream[job.key[2] : apply_by])  # up to apply_by: not held
 
     def post_one(body: dict[str, Any]) -> Any:
         if writer == "http":
@@ -161,7 +161,7 @@ def test_a_consolidation_due_in_another_process_s_events_is_applied_on_time(
     stream = hotspot_stream(4 * FIRST)
     job, _ = second_due(saw_due, never_answers, "f", stream)
     apply_by = job.apply_by
-    post_batches(saw_due, "f", stream[job.key[1] : apply_by])
+    post_batches(saw_due, "f", stream[job.key[2] : apply_by])
     waiting, out = in_background(
         lambda: catches_up.post("/v1/fleets/f/targets", json=stream[apply_by])
     )
@@ -242,6 +242,6 @@ def test_a_fleet_shows_its_next_consolidation(
     post_batches(client, "f", stream[:FIRST])
     assert view("f") == {"due_at": FIRST, "apply_by": FIRST}  # due, being solved
     job, answer = second_due(client, solver, "f", stream)  # answers the first on its way
-    assert view("f") == {"due_at": job.key[1], "apply_by": job.apply_by}
+    assert view("f") == {"due_at": job.key[2], "apply_by": job.apply_by}
     answer.set_result(job.solve())
-    assert view("f") == {"due_at": job.key[1], "apply_by": job.apply_by}  # until applied
+    assert view("f") == {"due_at": job.key[2], "apply_by": job.apply_by}  # until applied

@@ -1,0 +1,224 @@
+"""A fleet of several types learns per type (:attr:`Fleet.learns_per_type`).
+
+The reference is the decomposition itself: one consolidating fleet per type, each
+fed the targets that needed its type, with the same settings.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+
+import numpy as np
+import pytest
+
+from routing_svc.demand.network import hotspot_mixture
+from routing_svc.errors import InvalidInput, ReplayMismatch
+from routing_svc.network import RoadSpace, load_network
+from routing_svc.network.catalogue import resolve_network
+from routing_svc.sa import (
+    ROUTING,
+    Consolidation,
+    ConsolidationPolicy,
+    Fleet,
+    FleetConfig,
+    Vehicle,
+    learning_config,
+)
+from routing_svc.types import NetPosition
+
+NET = load_network(resolve_network("drt"))
+POLICY = ConsolidationPolicy(reservoir=400, first=50, growth=1.25, longest=100, block=50)
+TYPES = {"A": 3, "B": 2}
+Stream = list[tuple[NetPosition, list[str] | None]]
+
+
+@pytest.fixture(scope="module")
+def space() -> RoadSpace:
+    return RoadSpace(NET, cost="length")
+
+
+@pytest.fixture(scope="module")
+def config(space: RoadSpace) -> FleetConfig:
+    return learning_config(
+        "consolidating",
+        typical_cost=space.typical_cost(),
+        n_vehicles=sum(TYPES.values()),
+        objective=ROUTING,
+        consolidation=POLICY,
+    )
+
+
+def starts(kind: str) -> list[tuple[Vehicle, NetPosition]]:
+    """The vehicles of ``kind`` and their starting references (all on a few edges)."""
+    offset = 0 if kind == "A" else 7
+    return [
+        (Vehicle(f"{kind}{i}", kind), NetPosition(offset + 11 * i, 0.0)) for i in range(TYPES[kind])
+    ]
+
+
+def typed_fleet(space: RoadSpace, config: FleetConfig) -> Fleet[NetPosition]:
+    return Fleet.create(space, starts("A") + starts("B"), config)
+
+
+def stream(seed: int, n: int, mixed: float = 0.0) -> Stream:
+    """``n`` targets of a three-hotspot demand; each needs one A or one B (even odds),
+    or, with probability ``mixed``, any one vehicle or an A and a B."""
+    demand = hotspot_mixture(NET, centres=3, rng=np.random.default_rng(100 + seed))
+    rng = np.random.default_rng(seed)
+    targets = demand.sample(rng, n)
+    out: Stream = []
+    for z in targets:
+        if rng.random() < mixed:
+            out.append((z, None if rng.random() < 0.5 else ["A", "B"]))
+        else:
+            out.append((z, ["A" if rng.random() < 0.5 else "B"]))
+    return out
+
+
+def test_a_fleet_of_types_with_one_speed_each_learns_per_type(
+    space: RoadSpace, config: FleetConfig
+) -> None:
+    fleet = typed_fleet(space, config)
+    assert fleet.learns_per_type
+    assert fleet.state.learning is None
+    assert list(fleet.state.type_learning) == ["A", "B"]
+    assert fleet.state.type_learning["A"].vehicles == (0, 1, 2)
+    assert fleet.state.type_learning["B"].vehicles == (3, 4)
+    mixed_speeds = [*starts("A"), (Vehicle("B0", "B", speed=1.0), NetPosition(7, 0.0))]
+    mixed_speeds.append((Vehicle("B1", "B", speed=2.0), NetPosition(18, 0.0)))
+    assert not Fleet.create(space, mixed_speeds, config).learns_per_type
+    identical = Fleet.create(space, [(Vehicle(v.id), p) for v, p in starts("A")], config)
+    assert not identical.learns_per_type and identical.state.learning is not None
+
+
+def test_targets_of_one_type_learn_exactly_as_one_fleet_per_type(
+    space: RoadSpace, config: FleetConfig
+) -> None:
+    fleet = typed_fleet(space, config)
+    alone = {kind: Fleet.create(space, starts(kind), config) for kind in TYPES}
+    made = {kind: 0 for kind in TYPES}
+    for z, requires in stream(3, 1400):
+        assert requires is not None
+        (kind,) = requires
+        out = fleet.observe(z, requires)
+        ref = alone[kind].observe(z)
+        assert out.dispatch.moved == ref.dispatch.moved
+        assert out.new_position == ref.new_position
+        assert out.consolidation == ref.consolidation
+        made[kind] += out.consolidation is not None
+    assert min(made.values()) >= 4  # several consolidations of each type were compared
+    assert fleet.positions == {**alone["A"].positions, **alone["B"].positions}
+    for kind, learning in fleet.state.type_learning.items():
+        assert learning.seen == alone[kind].state.targets
+        assert list(learning.reservoir) == list(alone[kind].state.learning.reservoir)  # type: ignore[union-attr]
+
+
+def test_targets_for_any_vehicle_or_several_types_feed_no_type(
+    space: RoadSpace, config: FleetConfig
+) -> None:
+    fleet = typed_fleet(space, config)
+    targets = stream(4, 900, mixed=0.4)
+    for z, requires in targets:
+        fleet.observe(z, requires)
+    for kind, learning in fleet.state.type_learning.items():
+        own = [z for z, r in targets if r == [kind]]
+        assert learning.seen == len(own) < len(targets) // 2
+        assert list(learning.reservoir) == own[-POLICY.reservoir :]
+    assert fleet.state.targets == len(targets)
+
+
+def run(fleet: Fleet[NetPosition], targets: Stream) -> list[Consolidation[NetPosition] | None]:
+    return [fleet.observe(z, r).consolidation for z, r in targets]
+
+
+def test_snapshot_and_restore_go_on_as_if_never_stopped(
+    space: RoadSpace, config: FleetConfig
+) -> None:
+    targets = stream(5, 1200, mixed=0.2)
+    whole = typed_fleet(space, config)
+    run(whole, targets)
+    first = typed_fleet(space, config)
+    run(first, targets[:700])
+    saved = json.loads(json.dumps(first.snapshot()))
+    assert set(saved["type_learning"]) == {"A", "B"} and "learning" not in saved
+    second = typed_fleet(space, config)
+    second.restore(saved)
+    run(second, targets[700:])
+    assert second.positions == whole.positions
+    assert second.snapshot() == whole.snapshot()
+    del saved["type_learning"]
+    with pytest.raises(InvalidInput, match="per type"):
+        typed_fleet(space, config).restore(saved)
+
+
+def test_replay_applies_the_recorded_consolidations_and_checks_where(
+    space: RoadSpace, config: FleetConfig
+) -> None:
+    targets = stream(6, 1000, mixed=0.2)
+    live = typed_fleet(space, config)
+    recorded = run(live, targets)
+    assert sum(c is not None for c in recorded) >= 6
+    replayed = typed_fleet(space, config)
+    for (z, r), done in zip(targets, recorded, strict=True):
+        replayed.replay_observe(z, r, done)
+    assert replayed.snapshot() == live.snapshot()
+    # a consolidation recorded at a target where none was due is refused
+    first = next(c for c in recorded if c is not None)
+    z, r = targets[0]
+    with pytest.raises(ReplayMismatch, match="none was due"):
+        typed_fleet(space, config).replay_observe(z, r, first)
+
+
+def test_deferred_solves_are_keyed_by_type_and_replay_the_same(
+    space: RoadSpace, config: FleetConfig
+) -> None:
+    targets = stream(7, 1000, mixed=0.2)
+    deferred = typed_fleet(space, config)
+    recorded: list[Consolidation[NetPosition] | None] = []
+    deferred.defer_consolidations = True
+    keys: list[tuple[int, int, int]] = []
+    for z, r in targets:
+        job = deferred.consolidation_job()
+        solved = None
+        if job is not None:
+            if not keys or keys[-1] != job.key:
+                keys.append(job.key)
+            solved = (job.key, job.solve())
+            scheduled = deferred.scheduled_consolidation()
+            assert scheduled is not None and scheduled[0] <= deferred.state.targets
+        recorded.append(deferred.observe(z, r, solved=solved).consolidation)
+    firsts = {key[0] for key in keys}
+    assert firsts == {0, 3}  # jobs of both types: keyed by each type's first vehicle
+    assert sum(c is not None for c in recorded) >= len(keys) - 2
+    replayed = typed_fleet(space, config)
+    for (z, r), done in zip(targets, recorded, strict=True):
+        replayed.replay_observe(z, r, done)
+    assert replayed.snapshot() == deferred.snapshot()
+
+
+def test_the_schedule_is_the_earliest_of_the_types_in_the_fleets_counts(
+    space: RoadSpace, config: FleetConfig
+) -> None:
+    fleet = typed_fleet(space, config)
+    assert fleet.scheduled_consolidation() == (POLICY.first, POLICY.first + apply_lag(fleet))
+    targets: Sequence[tuple[NetPosition, list[str] | None]] = stream(8, 30, mixed=0.5)
+    for z, r in targets:
+        fleet.observe(z, r)
+    counts = {k: learning.seen for k, learning in fleet.state.type_learning.items()}
+    due, _ = fleet.scheduled_consolidation() or (0, 0)
+    assert due == len(targets) + POLICY.first - max(counts.values())
+
+
+def apply_lag(fleet: Fleet[NetPosition]) -> int:
+    """How long after falling due a fresh type's first consolidation may be applied."""
+    learning = fleet.state.type_learning["A"]
+    return (
+        POLICY.apply_by(
+            due=learning.next_consolidation,
+            epoch=learning.epoch,
+            accepted_at=learning.accepted_at,
+            hastened_at=learning.hastened_at,
+        )
+        - learning.next_consolidation
+    )
