@@ -8,15 +8,17 @@ the best p-median of the demand for ``n / 2`` vehicles, and a fleet's gap is its
 expected cost (:func:`~routing_svc.optimum.heterogeneous.heterogeneous_cost`, objective
 (11) in general form) against it.
 
-Rules: ``probe`` (what a fleet of several types learns by when it names no rule),
-``paper`` (eq. (10) alone) and ``consolidating`` (for such a fleet the held step alone,
-without consolidations); from a *cold* start (random positions) and a *warm* one (at the
-optimum). The named baseline, in the same run on the same targets, is the batch answer:
-per type, the p-median of the targets seen so far that needed that type. Beside it,
-``per_type``: one ``consolidating`` fleet of identical vehicles per type, each fed the
-targets that needed its type (what the decomposition would learn; not a rule a fleet can
-ask for). Medians over seeds; the worst network counts; the goals are those of the
-learning issue.
+Rules: ``consolidating`` (what such a fleet learns by when it names no rule: each type
+consolidates on the recent targets that needed it, :attr:`Fleet.learns_per_type`),
+``probe`` (the default before, and still for a fleet with stands or a type of several
+speeds; a target that needs a type makes no probe) and ``paper`` (eq. (10) alone); from a
+*cold* start (random positions) and a *warm* one (at the optimum). The named baseline, in
+the same run on the same targets, is the batch answer: per type, the p-median of the
+targets seen so far that needed that type. Beside it, ``per_type``: one consolidating
+fleet of identical vehicles per type, each fed the targets that needed its type (the
+decomposition, built apart; ``same_as_per_type`` counts the records where one fleet
+learned exactly as it did). Medians over seeds; the worst network counts; the goals are
+those of the learning issue.
 
 Run: ``python bench/heterogeneous.py`` (seven networks, 8 and 20 vehicles, seeds 0-2) or,
 e.g., ``python bench/heterogeneous.py --nets drt --vehicles 8 --seeds 0``.
@@ -211,6 +213,7 @@ def main() -> int:
         "baseline": "batch: per type, the p-median of the targets seen so far that needed it",
         "gap": "exact expected cost of objective (11) / optimum - 1",
         **summarise(records),
+        "same_as_per_type": sum(r["consolidating"] == r[PER_TYPE] for r in records),
         "records": records,
         "seconds": time.perf_counter() - started,
     }

@@ -50,6 +50,8 @@ def test_heterogeneous_report_is_its_records(tmp_path: Path) -> None:
             assert table[rule]["cold"][label] == statistics.median(
                 r[rule]["cold"][label] for r in records
             )
+    same = sum(r["consolidating"] == r["per_type"] for r in records)
+    assert report["same_as_per_type"] == same
     for rule in RULES:
         worst_warm = max(table[rule]["warm"].values())
         assert report["goals"][rule]["warm_every"] == [worst_warm, "grid/4", worst_warm <= 0.05]

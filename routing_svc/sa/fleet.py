@@ -150,8 +150,14 @@ class FleetConfig:
     stands: StandSet[Any] | None = None
     """The stands the vehicles may park at (:mod:`routing_svc.sa.stands`): a
     consolidation solves over them only, with their capacities; ``None``: anywhere."""
+    per_type: bool = False
+    """``consolidating`` only: a fleet of several types consolidates each type
+    (:attr:`Fleet.learns_per_type`); ``False``, as fleets stored before it did, only
+    the held step."""
 
     def __post_init__(self) -> None:
+        if self.per_type and self.consolidation is None:
+            raise InvalidInput("learning per type belongs to the 'consolidating' rule")
         if self.consolidation is None and self.window is None:
             return
         if self.consolidation is None or self.window is None:
@@ -184,6 +190,8 @@ class FleetConfig:
             data["rule"] = Rule.CONSOLIDATING.value
             data["window"] = self.window
             data["consolidation"] = self.consolidation.to_dict()
+            if self.per_type:
+                data["per_type"] = True
         if self.learning_vehicles is not LearningVehicles.ALL:
             data["learning_vehicles"] = self.learning_vehicles.value
         if self.stands is not None:
@@ -220,6 +228,7 @@ class FleetConfig:
             else None,
             learning_vehicles=LearningVehicles(data.get("learning_vehicles", "all")),
             stands=None if stands is None or decode is None else StandSet.from_dict(stands, decode),
+            per_type=consolidating and bool(data.get("per_type", False)),
         )
 
 
@@ -432,7 +441,10 @@ class Fleet(Generic[P]):
     def _groups_by_type(self) -> dict[str, tuple[int, ...]] | None:
         """Each type's vehicles when the fleet learns per type (:attr:`learns_per_type`),
         else ``None``."""
-        if self.config.consolidation is None or self._identical or self.config.stands is not None:
+        config = self.config
+        if config.consolidation is None or not config.per_type or self._identical:
+            return None
+        if config.stands is not None:
             return None
         groups: dict[str, list[int]] = {}
         for i, kind in enumerate(self._types):
@@ -448,9 +460,10 @@ class Fleet(Generic[P]):
         Objective (11) of targets that each need one vehicle of one type is a sum of
         one p-median per type, so each type's vehicles consolidate on the recent
         targets that needed their type, on their own clock (:attr:`Learning.seen`). A
-        fleet learns so under ``consolidating`` when it has several types (or speeds),
-        each type's vehicles share one speed, and it has no stands (their capacities
-        are shared between types); other targets make held steps only.
+        fleet learns so under ``consolidating`` (with :attr:`FleetConfig.per_type`) when
+        it has several types, each type's vehicles share one speed, and it has no
+        stands (their capacities are shared between types); other targets make held
+        steps only.
         """
         return self._type_groups is not None
 

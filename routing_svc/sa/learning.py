@@ -115,4 +115,5 @@ def learning_config(
         window=junction,
         consolidation=consolidation,
         learning_vehicles=LearningVehicles(learning_vehicles),
+        per_type=kind is Rule.CONSOLIDATING,
     )

@@ -222,3 +222,20 @@ def apply_lag(fleet: Fleet[NetPosition]) -> int:
         )
         - learning.next_consolidation
     )
+
+
+def test_a_stored_config_keeps_the_learning_it_was_created_with(
+    space: RoadSpace, config: FleetConfig
+) -> None:
+    stored = json.loads(json.dumps(config.to_dict()))
+    assert stored["per_type"] is True
+    assert typed_fleet(space, FleetConfig.from_dict(stored)).learns_per_type
+    del stored["per_type"]  # stored before a fleet of several types learned per type
+    before = FleetConfig.from_dict(stored)
+    assert before.to_dict() == stored
+    fleet = typed_fleet(space, before)
+    assert not fleet.learns_per_type and fleet.state.learning is not None
+    for z, requires in stream(9, 400):
+        assert fleet.observe(z, requires).consolidation is None  # held steps only, as then
+    with pytest.raises(InvalidInput, match="per type"):
+        FleetConfig(objective=ROUTING, schedule=config.schedule, per_type=True)
