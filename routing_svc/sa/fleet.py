@@ -683,6 +683,7 @@ class Fleet(Generic[P]):
         requires: Sequence[str] | None,
         *,
         recorded: Consolidation[P] | None = None,
+        recorded_for: tuple[str, ...] | None = None,
         replaying: bool = False,
         solved: Solved[P] | None = None,
     ) -> Outcome[P]:
@@ -692,9 +693,10 @@ class Fleet(Generic[P]):
         (:attr:`ConsolidationPolicy.unfitted_confidence`) or unless
         :func:`~routing_svc.sa.consolidation.move_pays` on the reservoir), then the shift
         test and, when due, a consolidation (see :meth:`_learn_from` for ``recorded``,
-        ``replaying`` and ``solved``). The mover's hold and checks are its group's
-        (:attr:`learns_per_type`); the target feeds the group it needs
-        (:meth:`_fed_by`)."""
+        ``replaying`` and ``solved``; ``recorded_for``: the ids of the vehicles it moved,
+        when known). The mover's hold and checks are its group's (:attr:`learns_per_type`);
+        the target feeds the groups it needs (:meth:`_fed_by`), and makes at most one
+        consolidation, the first due in type order (another stays due)."""
         dispatch, found = self._search(target, requires)
         state = self.state
         mover = found.mover
@@ -745,17 +747,24 @@ class Fleet(Generic[P]):
         state.positions[mover] = new
         state.updates[mover] += 1
         state.targets += 1
-        consolidation = None
-        fed = self._fed_by(requires)
-        if fed is not None and self._consolidates():
-            if fed.vehicles is not None:
-                fed.seen += 1
-            consolidation = self._learn_from(
-                fed, policy, target, dispatch.objective, recorded, replaying, solved
+        consolidation: Consolidation[P] | None = None
+        consolidated: tuple[str, ...] = ()
+        fed = self._fed_by(requires, found, dispatch.objective) if self._consolidates() else []
+        if recorded is not None and recorded_for is None and len(fed) > 1:
+            raise ReplayMismatch("a consolidation recorded for several types names no vehicles")
+        for learning, cost in fed:  # one consolidation at most per target: the first due
+            if learning.vehicles is not None:
+                learning.seen += 1
+            ids = self._group_ids(learning)
+            free = consolidation is None
+            mine = recorded if free and (recorded_for is None or recorded_for == ids) else None
+            done = self._learn_from(
+                learning, policy, target, cost, mine, replaying, solved, may_consolidate=free
             )
-        elif recorded is not None:
+            if done is not None:
+                consolidation, consolidated = done, ids
+        if recorded is not None and consolidation is None:
             raise ReplayMismatch("a consolidation was recorded for a target that makes none")
-        consolidated = () if fed is None or consolidation is None else self._group_ids(fed)
         return Outcome(
             index, dispatch, gamma, moved, 0.0, old, new, (), consolidation, consolidated
         )
@@ -771,15 +780,34 @@ class Fleet(Generic[P]):
             return [self.state.learning]
         return list(self.state.type_learning.values())
 
-    def _fed_by(self, requires: Sequence[str] | None) -> Learning[P] | None:
-        """The learning state a target feeds: the whole fleet's for a target that needs
-        any one vehicle; a type's for one that needs exactly one vehicle, of that type
-        (:attr:`learns_per_type`); none for the others."""
+    def _fed_by(
+        self, requires: Sequence[str] | None, found: Assignment[P], cost: float
+    ) -> list[tuple[Learning[P], float]]:
+        """The learning states a target feeds, each with the cost its shift test sees.
+
+        The whole fleet's, at the target's cost ``cost``, for a target that needs any
+        one vehicle. For a fleet that learns per type (:attr:`learns_per_type`), each
+        type the target needs, in name order: at ``cost`` when it needs one vehicle,
+        else at the cost of the closest reference of that type (``found``, the search
+        of references). A consolidation of a type fits its references to all the
+        targets that needed it, a bound on objective (11) of the targets that needed
+        several (their cost is the last arrival). Other targets feed none.
+        """
         if self._type_groups is None:
-            return None if requires else self.state.learning
-        if requires is not None and len(requires) == 1:
-            return self.state.type_learning.get(requires[0])
-        return None
+            learning = self.state.learning
+            return [] if requires or learning is None else [(learning, cost)]
+        if not requires:
+            return []
+        if len(requires) == 1:
+            return [(self.state.type_learning[requires[0]], cost)]
+        fastest: dict[str, float] = {}
+        for i, time in zip(found.served_by, found.times, strict=True):
+            kind = self._types[i]
+            fastest[kind] = min(time, fastest.get(kind, math.inf))
+        objective = self.config.objective
+        return [
+            (self.state.type_learning[k], objective.cost(t)) for k, t in sorted(fastest.items())
+        ]
 
     def _learning_of(self, vehicle: int) -> tuple[Learning[P], int]:
         """The learning state that holds ``vehicle``, and its index there."""
@@ -817,8 +845,11 @@ class Fleet(Generic[P]):
         recorded: Consolidation[P] | None,
         replaying: bool,
         solved: Solved[P] | None,
+        *,
+        may_consolidate: bool = True,
     ) -> Consolidation[P] | None:
-        """Keep ``target``, run the shift test on its ``cost`` and consolidate when due.
+        """Keep ``target``, run the shift test on its ``cost`` and consolidate when due
+        (and ``may_consolidate``: else it stays due).
 
         A due consolidation is, in replay (``replaying``), the ``recorded`` one or none
         (it was solved away from the fleet and applied at a later target); live,
@@ -849,6 +880,8 @@ class Fleet(Generic[P]):
         if now < learning.next_consolidation:
             if recorded is not None:
                 raise ReplayMismatch("a consolidation was recorded where none was due")
+            return None
+        if not may_consolidate:
             return None
         if replaying:
             if recorded is None:  # solved away from the fleet, applied at a later target
@@ -963,10 +996,16 @@ class Fleet(Generic[P]):
         return (first, learning.epoch, learning.next_consolidation)
 
     def replay_observe(
-        self, target: P, requires: Sequence[str] | None, recorded: Consolidation[P] | None
+        self,
+        target: P,
+        requires: Sequence[str] | None,
+        recorded: Consolidation[P] | None,
+        recorded_for: Sequence[str] | None = None,
     ) -> Outcome[P]:
         """:meth:`observe` for replay: the consolidation this target triggered is
-        ``recorded`` and applied, not solved again.
+        ``recorded`` and applied, not solved again; ``recorded_for``, the ids of the
+        vehicles it moved (:attr:`Outcome.consolidated`), names the type it is for (needed
+        when the target feeds several).
 
         Raises
         ------
@@ -978,7 +1017,14 @@ class Fleet(Generic[P]):
             if recorded is not None:
                 raise ReplayMismatch("a consolidation was recorded for a fleet that makes none")
             return self.observe(target, requires)
-        return self._observe_held(policy, target, requires, recorded=recorded, replaying=True)
+        return self._observe_held(
+            policy,
+            target,
+            requires,
+            recorded=recorded,
+            recorded_for=None if recorded_for is None else tuple(recorded_for),
+            replaying=True,
+        )
 
     @property
     def compiled_update(self) -> bool:

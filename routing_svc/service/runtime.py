@@ -107,6 +107,7 @@ class FleetRuntime:
         requires: Sequence[str] | None,
         *,
         recorded: Consolidation[NetPosition] | None = None,
+        recorded_for: Sequence[str] | None = None,
         replaying: bool = False,
         legacy: bool = False,
         described: dict[str, Any] | None = None,
@@ -114,14 +115,15 @@ class FleetRuntime:
         """Serve one target; return the event's payload and result JSON.
 
         ``replaying``: the event is read back from the log, and ``recorded`` is the
-        consolidation its stored result holds (applied, not solved again).
+        consolidation its stored result holds (applied, not solved again), for the
+        vehicles ``recorded_for`` when it names them.
         ``legacy``: the stored result predates the dispatch answer; it is written
         again without it. ``described``: the target's description, computed already
         (:meth:`NetworkEntry.describe_many`).
         """
         self._check_live()
         if replaying:
-            outcome = self.fleet.replay_observe(target, requires, recorded)
+            outcome = self.fleet.replay_observe(target, requires, recorded, recorded_for)
         else:
             self._hand_over_due()  # one that fell due in events caught up from the log
             pending = self._pending
@@ -265,10 +267,15 @@ class FleetRuntime:
         payload = json.loads(payload_json)
         if kind == "target":
             target = self.base_space.decode(payload["target"])
-            recorded = self._recorded_consolidation(result_json)
+            recorded, recorded_for = self._recorded_consolidation(result_json)
             legacy = result_json is not None and '"dispatch"' not in result_json
             _, result = self.apply_target(
-                target, payload["requires"], recorded=recorded, replaying=True, legacy=legacy
+                target,
+                payload["requires"],
+                recorded=recorded,
+                recorded_for=recorded_for,
+                replaying=True,
+                legacy=legacy,
             )
         elif kind == "vehicle_state":
             decode = self.base_space.decode
@@ -293,15 +300,27 @@ class FleetRuntime:
         if result_json is not None and result != result_json:
             raise ReplayMismatch(f"fleet {self.id}: event {seq} replays to a different result")
 
-    def _recorded_consolidation(self, result_json: str | None) -> Consolidation[NetPosition] | None:
+    def _recorded_consolidation(
+        self, result_json: str | None
+    ) -> tuple[Consolidation[NetPosition] | None, list[str] | None]:
         """The consolidation a stored target result holds (only ``consolidating`` fleets
-        record any)."""
+        record any), and the ids of the vehicles it moved when it names them (a fleet
+        that learns per type)."""
         if result_json is None or self.fleet.config.consolidation is None:
-            return None
+            return None, None
         if '"consolidated"' not in result_json:
-            return None
+            return None, None
         data = json.loads(result_json).get("consolidated")
-        return None if data is None else Consolidation.from_dict(data, self.base_space.decode)
+        if data is None:
+            return None, None
+        vehicles = data.get("vehicles")
+        if vehicles is not None and not (
+            isinstance(vehicles, list) and all(isinstance(v, str) for v in vehicles)
+        ):
+            raise ReplayMismatch(
+                f"fleet {self.id}: a recorded consolidation's vehicles are malformed"
+            )
+        return Consolidation.from_dict(data, self.base_space.decode), vehicles
 
     def _check_live(self) -> None:
         if self.deleted:

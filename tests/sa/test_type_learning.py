@@ -114,7 +114,7 @@ def test_targets_of_one_type_learn_exactly_as_one_fleet_per_type(
         assert list(learning.reservoir) == list(alone[kind].state.learning.reservoir)  # type: ignore[union-attr]
 
 
-def test_targets_for_any_vehicle_or_several_types_feed_no_type(
+def test_a_target_feeds_each_type_it_needs_and_one_for_any_vehicle_none(
     space: RoadSpace, config: FleetConfig
 ) -> None:
     fleet = typed_fleet(space, config)
@@ -122,14 +122,54 @@ def test_targets_for_any_vehicle_or_several_types_feed_no_type(
     for z, requires in targets:
         fleet.observe(z, requires)
     for kind, learning in fleet.state.type_learning.items():
-        own = [z for z, r in targets if r == [kind]]
-        assert learning.seen == len(own) < len(targets) // 2
+        own = [z for z, r in targets if r is not None and kind in r]
+        assert learning.seen == len(own) < len(targets)
         assert list(learning.reservoir) == own[-POLICY.reservoir :]
     assert fleet.state.targets == len(targets)
 
 
-def run(fleet: Fleet[NetPosition], targets: Stream) -> list[Consolidation[NetPosition] | None]:
-    return [fleet.observe(z, r).consolidation for z, r in targets]
+def test_a_target_of_several_types_tests_each_at_its_closest_reference(
+    space: RoadSpace, config: FleetConfig
+) -> None:
+    fleet = typed_fleet(space, config)
+    (z, _), *_ = stream(10, 1)
+    references = dict(fleet.positions)
+    fleet.observe(z, ["A", "B"])
+    for kind, learning in fleet.state.type_learning.items():
+        mine = [p for vid, p in references.items() if vid.startswith(kind)]
+        closest = float(space.cost_matrix(mine, [z]).min())
+        assert learning.block_size == 1
+        assert learning.block_cost == pytest.approx(ROUTING.cost(closest), rel=1e-12)
+
+
+def test_one_consolidation_a_target_the_other_type_stays_due(
+    space: RoadSpace, config: FleetConfig
+) -> None:
+    fleet = typed_fleet(space, config)
+    both = [(z, ["A", "B"]) for z, _ in stream(11, POLICY.first + 1)]
+    outcomes = [fleet.observe(z, r) for z, r in both]
+    made = [(o.target_number, o.consolidated) for o in outcomes if o.consolidation is not None]
+    # both types fall due at the 50th target: A (first by name) then, one target later, B
+    assert made == [(POLICY.first - 1, ("A0", "A1", "A2")), (POLICY.first, ("B0", "B1"))]
+    replayed = typed_fleet(space, config)
+    for (z, r), o in zip(both, outcomes, strict=True):
+        replayed.replay_observe(z, r, o.consolidation, o.consolidated or None)
+    assert replayed.snapshot() == fleet.snapshot()
+    # the vehicles a recorded consolidation moved decide its type; they must be given
+    again = typed_fleet(space, config)
+    for (z, r), o in zip(both[:-2], outcomes, strict=False):
+        again.replay_observe(z, r, o.consolidation)
+    with pytest.raises(ReplayMismatch, match="names no vehicles"):
+        again.replay_observe(both[-2][0], ["A", "B"], outcomes[-2].consolidation)
+
+
+Recorded = list[tuple[Consolidation[NetPosition] | None, tuple[str, ...] | None]]
+
+
+def run(fleet: Fleet[NetPosition], targets: Stream) -> Recorded:
+    """Every target's consolidation and the vehicles it moved."""
+    outcomes = [fleet.observe(z, r) for z, r in targets]
+    return [(o.consolidation, o.consolidated or None) for o in outcomes]
 
 
 def test_snapshot_and_restore_go_on_as_if_never_stopped(
@@ -158,13 +198,13 @@ def test_replay_applies_the_recorded_consolidations_and_checks_where(
     targets = stream(6, 1000, mixed=0.2)
     live = typed_fleet(space, config)
     recorded = run(live, targets)
-    assert sum(c is not None for c in recorded) >= 6
+    assert sum(c is not None for c, _ in recorded) >= 6
     replayed = typed_fleet(space, config)
-    for (z, r), done in zip(targets, recorded, strict=True):
-        replayed.replay_observe(z, r, done)
+    for (z, r), (done, moved) in zip(targets, recorded, strict=True):
+        replayed.replay_observe(z, r, done, moved)
     assert replayed.snapshot() == live.snapshot()
     # a consolidation recorded at a target where none was due is refused
-    first = next(c for c in recorded if c is not None)
+    first = next(c for c, _ in recorded if c is not None)
     z, r = targets[0]
     with pytest.raises(ReplayMismatch, match="none was due"):
         typed_fleet(space, config).replay_observe(z, r, first)
@@ -175,7 +215,7 @@ def test_deferred_solves_are_keyed_by_type_and_replay_the_same(
 ) -> None:
     targets = stream(7, 1000, mixed=0.2)
     deferred = typed_fleet(space, config)
-    recorded: list[Consolidation[NetPosition] | None] = []
+    recorded: Recorded = []
     deferred.defer_consolidations = True
     keys: list[tuple[int, int, int]] = []
     for z, r in targets:
@@ -187,13 +227,14 @@ def test_deferred_solves_are_keyed_by_type_and_replay_the_same(
             solved = (job.key, job.solve())
             scheduled = deferred.scheduled_consolidation()
             assert scheduled is not None and scheduled[0] <= deferred.state.targets
-        recorded.append(deferred.observe(z, r, solved=solved).consolidation)
+        out = deferred.observe(z, r, solved=solved)
+        recorded.append((out.consolidation, out.consolidated or None))
     firsts = {key[0] for key in keys}
     assert firsts == {0, 3}  # jobs of both types: keyed by each type's first vehicle
-    assert sum(c is not None for c in recorded) >= len(keys) - 2
+    assert sum(c is not None for c, _ in recorded) >= len(keys) - 2
     replayed = typed_fleet(space, config)
-    for (z, r), done in zip(targets, recorded, strict=True):
-        replayed.replay_observe(z, r, done)
+    for (z, r), (done, moved) in zip(targets, recorded, strict=True):
+        replayed.replay_observe(z, r, done, moved)
     assert replayed.snapshot() == deferred.snapshot()
 
 
