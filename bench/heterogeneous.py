@@ -1,12 +1,15 @@
 """Learning with vehicles of two types: how far each rule stays from the optimum of objective (11).
 
-Half the fleet is of type ``A``, half of type ``B`` (one speed); each target of the
+Half the fleet is of type ``A``, half of type ``B`` (one speed). Each target of the
 three-hotspot demand of ``bench/learning.py`` needs one vehicle of type ``A`` or one of
-type ``B``, with equal chance wherever it appears. Objective (11) is then the sum of two
-p-medians, one per type on the whole demand, each weighted by its share: the optimum is
-the best p-median of the demand for ``n / 2`` vehicles, and a fleet's gap is its exact
-expected cost (:func:`~routing_svc.optimum.heterogeneous.heterogeneous_cost`, objective
-(11) in general form) against it.
+type ``B``, with equal chance wherever it appears (``--mix one-of-two``, the default), or
+needs one A, one B, or an A and a B, a third each (``--mix thirds``; the last arrival
+serves it). With one type a target, objective (11) is the sum of two p-medians, one per
+type on the whole demand: the optimum is the best p-median of the demand for ``n / 2``
+vehicles. With ``thirds`` it is the best found by the heterogeneous solver's local search
+over the same candidate sites. A fleet's gap is its exact expected cost
+(:func:`~routing_svc.optimum.heterogeneous.heterogeneous_cost`, objective (11) in general
+form) against the optimum.
 
 Rules: ``consolidating`` (what such a fleet learns by when it names no rule: each type
 consolidates on the recent targets that needed it, :attr:`Fleet.learns_per_type`),
@@ -17,11 +20,12 @@ the same run on the same targets, is the batch answer: per type, the p-median of
 targets seen so far that needed that type. Beside it, ``per_type``: one consolidating
 fleet of identical vehicles per type, each fed the targets that needed its type (the
 decomposition, built apart; ``same_as_per_type`` counts the records where one fleet
-learned exactly as it did). Medians over seeds; the worst network counts; the goals are
+learned exactly as it did: all of them with one type a target; with ``thirds`` one fleet
+makes one consolidation a target, the separate ones may make two). Medians over seeds; the worst network counts; the goals are
 those of the learning issue.
 
 Run: ``python bench/heterogeneous.py`` (seven networks, 8 and 20 vehicles, seeds 0-2) or,
-e.g., ``python bench/heterogeneous.py --nets drt --vehicles 8 --seeds 0``.
+e.g., ``python bench/heterogeneous.py --nets drt --vehicles 8 --seeds 0 --mix thirds``.
 """
 
 from __future__ import annotations
@@ -35,58 +39,89 @@ from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
-from learning import NETWORKS, instance, network_file, network_name
+from learning import NETWORKS, Instance, instance, network_file, network_name
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput, UnknownNetwork
 from routing_svc.optimum import solve_demand
-from routing_svc.optimum.heterogeneous import RequirementClass, heterogeneous_cost
+from routing_svc.optimum.heterogeneous import (
+    RequirementClass,
+    heterogeneous_cost,
+    solve_heterogeneous,
+)
 from routing_svc.sa import Fleet, Objective, Vehicle, learning_config
 from routing_svc.sim.command import parse_seeds
-from routing_svc.types import NetPosition
+from routing_svc.types import FloatArray, NetPosition
 
 TYPES = ("A", "B")
-MIX = (RequirementClass(("A",), 0.5), RequirementClass(("B",), 0.5))
+MIXES = {
+    "one-of-two": (RequirementClass(("A",), 0.5), RequirementClass(("B",), 0.5)),
+    "thirds": (
+        RequirementClass(("A",), 1 / 3),
+        RequirementClass(("B",), 1 / 3),
+        RequirementClass(("A", "B"), 1 / 3),
+    ),
+}
+"""Requirement mixes: each target needs one A or one B; or a third of them an A and a B."""
 RULES = ("probe", "paper", "consolidating")
 PER_TYPE = "per_type"
 SCENARIOS = ("cold", "warm")
 CHECKPOINTS = (300, 1000, 3000, 10000)
 GOALS = {"cold_3000": 0.05, "warm_every": 0.05, "warm_from_3000": 0.015}
 
-Job = tuple[str, int, int, int]
+Job = tuple[str, int, int, int, str]
+
+
+def optimum_of(
+    inst: Instance, types: list[str], speeds: FloatArray, mix: tuple[RequirementClass, ...]
+) -> tuple[list[NetPosition], float]:
+    """Each vehicle's position at the optimum of objective (11), and its value: with
+    targets of one type each, the p-median of the demand per type (the decomposition,
+    valued by the p-medians); else the best found by :func:`solve_heterogeneous` over
+    the instance's candidate sites (valued by it)."""
+    if all(len(c.requires) == 1 for c in mix):
+        per_type = {t: solve_demand(inst.space, inst.demand, types.count(t)) for t in TYPES}
+        value = sum(c.share * per_type[c.requires[0]].objective for c in mix)
+        return [p for t in TYPES for p in per_type[t].positions], value
+    weights = np.asarray(inst.demand.weights)
+    found = solve_heterogeneous(inst.matrix, weights, types, speeds, mix, method="heuristic")
+    return [inst.sites[i] for i in found.sites], found.objective
 
 
 def job(args: Job) -> dict[str, Any]:
-    net, n, seed, targets = args
+    net, n, seed, targets, mix_name = args
+    mix = MIXES[mix_name]
     t0 = time.perf_counter()
     inst = instance(net, n, seed)
     space = inst.space
     types = [TYPES[0]] * (n // 2) + [TYPES[1]] * (n - n // 2)
     speeds = np.ones(n)
-    per_type = {t: solve_demand(space, inst.demand, types.count(t)) for t in TYPES}
-    optimum = sum(c.share * per_type[c.requires[0]].objective for c in MIX)
-    at_optimum = [p for t in TYPES for p in per_type[t].positions]
+    at_optimum, optimum = optimum_of(inst, types, speeds, mix)
 
     def gap(positions: list[NetPosition]) -> float:
-        value = heterogeneous_cost(space, positions, types, speeds, inst.demand, MIX)
+        value = heterogeneous_cost(space, positions, types, speeds, inst.demand, mix)
         return float(value / optimum - 1.0)
 
     rng = np.random.default_rng([seed, 1])
     stream = inst.demand.sample(rng, targets)
-    needs = [TYPES[int(u >= 0.5)] for u in rng.random(targets)]
+    bounds = np.cumsum([c.share for c in mix])
+    needs = [
+        list(mix[min(int(np.searchsorted(bounds, u, side="right")), len(mix) - 1)].requires)
+        for u in rng.random(targets)
+    ]
     marks = [k for k in CHECKPOINTS if k <= targets]
     record: dict[str, Any] = {
         "network": network_name(net),
         "vehicles": n,
         "seed": seed,
         "optimum": optimum,
-        "gap_at_optimum": gap(at_optimum),  # objective (11) of the per-type optima: 0
+        "gap_at_optimum": gap(at_optimum),  # the evaluator against the optimum's value: 0
         "batch": {},
     }
     for k in marks:
         positions = []
         for t in TYPES:
-            seen = [z for z, need in zip(stream[:k], needs[:k], strict=True) if need == t]
+            seen = [z for z, need in zip(stream[:k], needs[:k], strict=True) if t in need]
             sample = DemandDistribution.of_targets(f"seen {t}", seen)
             positions += solve_demand(space, sample, types.count(t), method="heuristic").positions
         record["batch"][str(k)] = gap(positions)
@@ -105,7 +140,7 @@ def job(args: Job) -> dict[str, Any]:
             fleet = Fleet.create(space, vehicles, config)
             gaps = {}
             for k, (z, need) in enumerate(zip(stream, needs, strict=True), start=1):
-                fleet.observe(z, [need])
+                fleet.observe(z, need)
                 if k in marks:
                     gaps[str(k)] = gap(list(fleet.state.positions))
             record[rule][scenario] = gaps
@@ -127,7 +162,8 @@ def job(args: Job) -> dict[str, Any]:
             )
         gaps = {}
         for k, (z, need) in enumerate(zip(stream, needs, strict=True), start=1):
-            parts[need].observe(z)
+            for t in sorted(set(need)):
+                parts[t].observe(z)
             if k in marks:
                 gaps[str(k)] = gap([p for t in TYPES for p in parts[t].state.positions])
         record[PER_TYPE][scenario] = gaps
@@ -187,6 +223,7 @@ def main() -> int:
     p.add_argument("--seeds", type=parse_seeds, default="0,1,2")
     p.add_argument("--targets", type=int, default=max(CHECKPOINTS))
     p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--mix", choices=sorted(MIXES), default="one-of-two")
     args = p.parse_args()
     try:
         for net in args.nets.split(","):
@@ -199,7 +236,7 @@ def main() -> int:
         p.error("--vehicles: at least 2 (one of each type)")
     started = time.perf_counter()
     jobs: list[Job] = [
-        (net, n, seed, args.targets)
+        (net, n, seed, args.targets, args.mix)
         for net in args.nets.split(",")
         for n in args.vehicles
         for seed in args.seeds
@@ -209,7 +246,7 @@ def main() -> int:
     report = {
         "benchmark": "heterogeneous",
         "types": list(TYPES),
-        "mix": [{"requires": list(c.requires), "share": c.share} for c in MIX],
+        "mix": [{"requires": list(c.requires), "share": c.share} for c in MIXES[args.mix]],
         "baseline": "batch: per type, the p-median of the targets seen so far that needed it",
         "gap": "exact expected cost of objective (11) / optimum - 1",
         **summarise(records),

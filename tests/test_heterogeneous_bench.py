@@ -63,8 +63,24 @@ def test_heterogeneous_refuses_bad_options_before_any_work(tmp_path: Path) -> No
         (["--nets", "nosuch"], "'nosuch' is neither a known network"),
         (["--targets", "10"], "--targets must be at least 300 and --jobs at least 1"),
         (["--vehicles", "1"], "--vehicles: at least 2 (one of each type)"),
+        (["--mix", "halves"], "invalid choice: 'halves'"),
     ):
         done = run(tmp_path, *options)
         assert done.returncode == 2, (options, done.stderr)
         assert message in done.stderr.strip().splitlines()[-1]
         assert done.stdout == ""
+
+
+def test_a_third_of_the_targets_need_both_types(tmp_path: Path) -> None:
+    done = run(
+        tmp_path, "--nets", "drt", "--vehicles", "4", "--seeds", "0", "--targets", "300",
+        "--jobs", "1", "--mix", "thirds",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert [c["requires"] for c in report["mix"]] == [["A"], ["B"], ["A", "B"]]
+    assert sum(c["share"] for c in report["mix"]) == 1.0
+    (record,) = report["records"]
+    # the solver's value of its optimum is the evaluator's: objective (11) both ways
+    assert abs(record["gap_at_optimum"]) < 1e-9
+    assert set(record["consolidating"]) == {"cold", "warm"}
