@@ -21,8 +21,8 @@ targets seen so far that needed that type. Beside it, ``per_type``: one consolid
 fleet of identical vehicles per type, each fed the targets that needed its type (the
 decomposition, built apart; ``same_as_per_type`` counts the records where one fleet
 learned exactly as it did: all of them with one type a target; with ``thirds`` one fleet
-makes one consolidation a target, the separate ones may make two). Medians over seeds; the worst network counts; the goals are
-those of the learning issue.
+makes one consolidation a target, the separate ones may make two). Medians over seeds;
+the worst network counts; the goals are those of the learning issue.
 
 Run: ``python bench/heterogeneous.py`` (seven networks, 8 and 20 vehicles, seeds 0-2) or,
 e.g., ``python bench/heterogeneous.py --nets drt --vehicles 8 --seeds 0 --mix thirds``.
