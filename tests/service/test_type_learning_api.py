@@ -29,12 +29,15 @@ def typed_body(fleet_id: str, **extra: Any) -> dict[str, Any]:
     }
 
 
-def typed_stream(n: int) -> list[dict[str, Any]]:
-    """``n`` targets; the even ones need one A, the odd ones one B, every fifth any one."""
+def typed_stream(n: int, both: bool = False) -> list[dict[str, Any]]:
+    """``n`` targets; the even ones need one A, the odd ones one B, every fifth any one
+    (``both``: an A and a B)."""
     targets = hotspot_stream(n)
     for i, body in enumerate(targets):
         if i % 5 != 4:
             body["requires"] = ["A" if i % 2 == 0 else "B"]
+        elif both:
+            body["requires"] = ["A", "B"]
     return targets
 
 
@@ -80,12 +83,15 @@ def test_each_type_consolidates_on_its_targets_and_replays(
 def test_solved_by_the_workers_each_type_consolidates_and_replays(
     db_url: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    targets = typed_stream(900)
+    targets = typed_stream(900, both=True)
     with client_of(db_url, tmp_path, 1) as client:
         assert client.post("/v1/fleets", json=typed_body("typed")).status_code == 201
         results = post_batches(client, "typed", targets)
-    kinds = sorted(KINDS[r["consolidated"]["vehicles"][0]] for r in results if "consolidated" in r)
+    made = [r for r in results if "consolidated" in r]
+    kinds = sorted(KINDS[r["consolidated"]["vehicles"][0]] for r in made)
     assert kinds[0] == "A" and kinds[-1] == "B"
+    # targets that need an A and a B feed both: each type's first is due at its 250th
+    assert made[0]["seq"] < 502  # before either type had 250 targets of one type alone
     report = replay_report(db_url, tmp_path, capsys)
     (fleet,) = report["fleets"]
     assert fleet["ok"] is True and fleet["snapshot_identical"] is True
