@@ -805,9 +805,7 @@ class Fleet(Generic[P]):
         if not requires:
             return []
         kinds = sorted(set(requires))
-        return [
-            (self.state.type_learning[k], tuple(o for o in kinds if o != k)) for k in kinds
-        ]
+        return [(self.state.type_learning[k], tuple(o for o in kinds if o != k)) for k in kinds]
 
     def _learning_of(self, vehicle: int) -> tuple[Learning[P], int]:
         """The learning state that holds ``vehicle``, and its index there."""
