@@ -847,8 +847,9 @@ class Fleet(Generic[P]):
         may_consolidate: bool = True,
         others: tuple[str, ...] = (),
     ) -> Consolidation[P] | None:
-        """Keep ``target``, run the shift test on its ``cost`` and consolidate when due
-        (and ``may_consolidate``: else it stays due).
+        """Keep ``target`` (for a type, with the ``others`` types it needed), run the
+        shift test on its ``cost`` and consolidate when due (and ``may_consolidate``:
+        else it stays due).
 
         A due consolidation is, in replay (``replaying``), the ``recorded`` one or none
         (it was solved away from the fleet and applied at a later target); live,
