@@ -471,7 +471,6 @@ def consolidate(
     tested_refit: bool = True,
     stands: StandSet[P] | None = None,
     shakes: int = 0,
-    floors: Sequence[float] | None = None,
 ) -> Consolidation[P]:
     """Solve the reservoir without each fold, test on that fold, solve all if it pays.
 
@@ -514,30 +513,15 @@ def consolidate(
     shakes : int
         Shakes without gain of the accepted solve's neighbourhood search
         (:attr:`ConsolidationPolicy.shakes`).
-    floors : sequence of float, optional
-        Per reservoir target, a time ``F >= 0`` before which it cannot be served: the
-        arrival of the other types it needs, whose references stay. Its cost from a
-        reference is then ``c(max(T, F))``, objective (11) of a target whose last
-        arrival serves it, so the solve is one block of coordinate descent on (11).
-        ``None``: all 0.
     """
     p = len(positions)
     if len(reservoir) < 2 or len(anchor) != p or len(updates) != p:
         raise InvalidInput("a consolidation needs two targets and one anchor per vehicle")
     if isinstance(folds, bool) or not isinstance(folds, int) or folds < 2:
         raise InvalidInput(f"a consolidation needs at least 2 folds, got {folds!r}")
-    if floors is not None and len(floors) != len(reservoir):
-        raise InvalidInput("a consolidation needs one floor per reservoir target")
-    floor_of = [0.0] * len(reservoir) if floors is None else [float(f) for f in floors]
-    column: dict[tuple[P, float], int] = {}
-    for key in zip(reservoir, floor_of, strict=True):
-        column.setdefault(key, len(column))
-    places = np.fromiter(
-        (column[key] for key in zip(reservoir, floor_of, strict=True)),
-        dtype=np.int64,
-        count=len(reservoir),
-    )
-    targets = [z for z, _ in column]
+    targets = list(dict.fromkeys(reservoir))
+    column = {z: j for j, z in enumerate(targets)}
+    places = np.fromiter((column[z] for z in reservoir), dtype=np.int64, count=len(reservoir))
     parts = [
         np.bincount(places[f::folds], minlength=len(targets)).astype(np.float64)
         for f in range(folds)
@@ -559,8 +543,6 @@ def consolidate(
         anchored = _padded(_stand_rows(space, stands, anchor), opened, len(sites))
     costs = np.asarray(space.cost_matrix(sites, targets), dtype=np.float64)  # a new matrix
     costs /= speed
-    if floors is not None:
-        np.maximum(costs, np.array([f for _, f in column], dtype=np.float64), out=costs)
     costs **= power
     now = costs[actual].min(axis=0)
     before = float(weight @ now) / float(weight.sum())
@@ -660,7 +642,6 @@ class ConsolidationJob(Generic[P]):
     tested_refit: bool
     stands: StandSet[P] | None
     shakes: int
-    floors: tuple[float, ...] | None = None
 
     def solve(self) -> Consolidation[P]:
         """:func:`consolidate` on the copied inputs."""
@@ -679,7 +660,6 @@ class ConsolidationJob(Generic[P]):
             tested_refit=self.tested_refit,
             stands=self.stands,
             shakes=self.shakes,
-            floors=self.floors,
         )
 
 

@@ -291,9 +291,7 @@ class Learning(Generic[P]):
     :attr:`FleetState.type_learning`), whose counts are :attr:`seen`. ``holds`` and
     ``anchor`` are in this order."""
     seen: int = 0
-    """A type group's targets: those that needed its type."""
-    others: deque[tuple[str, ...]] = field(default_factory=deque)
-    """A type group's: per reservoir target, the other types it needed (oldest first)."""
+    """A type group's targets: those that needed exactly one vehicle, of its type."""
 
 
 class Dispatch(NamedTuple, Generic[P]):
@@ -438,7 +436,6 @@ class Fleet(Generic[P]):
             next_consolidation=now + policy.first,
             accepted_at=now,
             vehicles=members,
-            others=deque(maxlen=policy.reservoir),
         )
 
     def _groups_by_type(self) -> dict[str, tuple[int, ...]] | None:
@@ -752,25 +749,17 @@ class Fleet(Generic[P]):
         state.targets += 1
         consolidation: Consolidation[P] | None = None
         consolidated: tuple[str, ...] = ()
-        fed = self._fed_by(requires) if self._consolidates() else []
+        fed = self._fed_by(requires, found, dispatch.objective) if self._consolidates() else []
         if recorded is not None and recorded_for is None and len(fed) > 1:
             raise ReplayMismatch("a consolidation recorded for several types names no vehicles")
-        for learning, others in fed:  # one consolidation at most per target: the first due
+        for learning, cost in fed:  # one consolidation at most per target: the first due
             if learning.vehicles is not None:
                 learning.seen += 1
             ids = self._group_ids(learning)
             free = consolidation is None
             mine = recorded if free and (recorded_for is None or recorded_for == ids) else None
             done = self._learn_from(
-                learning,
-                policy,
-                target,
-                dispatch.objective,
-                mine,
-                replaying,
-                solved,
-                may_consolidate=free,
-                others=others,
+                learning, policy, target, cost, mine, replaying, solved, may_consolidate=free
             )
             if done is not None:
                 consolidation, consolidated = done, ids
@@ -791,21 +780,34 @@ class Fleet(Generic[P]):
             return [self.state.learning]
         return list(self.state.type_learning.values())
 
-    def _fed_by(self, requires: Sequence[str] | None) -> list[tuple[Learning[P], tuple[str, ...]]]:
-        """The learning states a target feeds, each with the other types the target needs.
+    def _fed_by(
+        self, requires: Sequence[str] | None, found: Assignment[P], cost: float
+    ) -> list[tuple[Learning[P], float]]:
+        """The learning states a target feeds, each with the cost its shift test sees.
 
-        The whole fleet's for a target that needs any one vehicle. For a fleet that
-        learns per type (:attr:`learns_per_type`), each type the target needs, in name
-        order: a type's consolidation prices such a target from the other types'
-        references (:meth:`_floors`). Other targets feed none.
+        The whole fleet's, at the target's cost ``cost``, for a target that needs any
+        one vehicle. For a fleet that learns per type (:attr:`learns_per_type`), each
+        type the target needs, in name order: at ``cost`` when it needs one vehicle,
+        else at the cost of the closest reference of that type (``found``, the search
+        of references). A consolidation of a type fits its references to all the
+        targets that needed it, a bound on objective (11) of the targets that needed
+        several (their cost is the last arrival). Other targets feed none.
         """
         if self._type_groups is None:
             learning = self.state.learning
-            return [] if requires or learning is None else [(learning, ())]
+            return [] if requires or learning is None else [(learning, cost)]
         if not requires:
             return []
-        kinds = sorted(set(requires))
-        return [(self.state.type_learning[k], tuple(o for o in kinds if o != k)) for k in kinds]
+        if len(requires) == 1:
+            return [(self.state.type_learning[requires[0]], cost)]
+        fastest: dict[str, float] = {}
+        for i, time in zip(found.served_by, found.times, strict=True):
+            kind = self._types[i]
+            fastest[kind] = min(time, fastest.get(kind, math.inf))
+        objective = self.config.objective
+        return [
+            (self.state.type_learning[k], objective.cost(t)) for k, t in sorted(fastest.items())
+        ]
 
     def _learning_of(self, vehicle: int) -> tuple[Learning[P], int]:
         """The learning state that holds ``vehicle``, and its index there."""
@@ -845,11 +847,9 @@ class Fleet(Generic[P]):
         solved: Solved[P] | None,
         *,
         may_consolidate: bool = True,
-        others: tuple[str, ...] = (),
     ) -> Consolidation[P] | None:
-        """Keep ``target`` (for a type, with the ``others`` types it needed), run the
-        shift test on its ``cost`` and consolidate when due (and ``may_consolidate``:
-        else it stays due).
+        """Keep ``target``, run the shift test on its ``cost`` and consolidate when due
+        (and ``may_consolidate``: else it stays due).
 
         A due consolidation is, in replay (``replaying``), the ``recorded`` one or none
         (it was solved away from the fleet and applied at a later target); live,
@@ -858,8 +858,6 @@ class Fleet(Generic[P]):
         state = self.state
         now = self._clock(learning)
         learning.reservoir.append(target)
-        if learning.vehicles is not None:
-            learning.others.append(others)
         learning.block_cost += cost
         learning.block_squares += cost * cost
         learning.block_size += 1
@@ -874,9 +872,6 @@ class Fleet(Generic[P]):
                 recent = list(learning.reservoir)[-policy.block :]
                 learning.reservoir.clear()
                 learning.reservoir.extend(recent)
-                kept = list(learning.others)[-policy.block :]
-                learning.others.clear()
-                learning.others.extend(kept)
                 learning.epoch = now
                 learning.next_consolidation = now + policy.first
                 learning.baseline = None
@@ -992,32 +987,7 @@ class Fleet(Generic[P]):
             tested_refit=policy.tested_refit,
             stands=self.config.stands,
             shakes=policy.shakes,
-            floors=self._floors(learning),
         )
-
-    def _floors(self, learning: Learning[P]) -> tuple[float, ...] | None:
-        """Per reservoir target of a type, when the last of the other types it needed
-        arrives from their current references (0 for a target that needed none): the
-        floor of its cost in the type's consolidation (:func:`consolidate`); ``None``
-        when no target needed another type."""
-        others = list(learning.others)
-        if learning.vehicles is None or not any(others):
-            return None
-        assert self._type_groups is not None
-        reservoir = list(learning.reservoir)
-        needing = [i for i, kinds in enumerate(others) if kinds]
-        targets = [reservoir[i] for i in needing]
-        space = cast(SampleSpace[P], self.space)
-        arrival: dict[str, np.ndarray] = {}
-        for kind in sorted({k for i in needing for k in others[i]}):
-            members = self._type_groups[kind]
-            times = space.cost_matrix([self.state.positions[j] for j in members], targets)
-            arrival[kind] = (np.asarray(times) / self._speeds[list(members)][:, None]).min(axis=0)
-        floors = [0.0] * len(reservoir)
-        for column, i in enumerate(needing):
-            last = max(float(arrival[kind][column]) for kind in others[i])
-            floors[i] = last if math.isfinite(last) else 0.0  # never reached: no floor
-        return tuple(floors)
 
     def _key(self, learning: Learning[P]) -> ConsolidationKey:
         """The key of ``learning``'s consolidation due now (or next): its first vehicle,
@@ -1268,11 +1238,7 @@ class Fleet(Generic[P]):
                 else {}
             ),
             **({"hastened_at": learning.hastened_at} if policy.hasten is not None else {}),
-            **(
-                {}
-                if learning.vehicles is None
-                else {"seen": learning.seen, "others": [list(o) for o in learning.others]}
-            ),
+            **({} if learning.vehicles is None else {"seen": learning.seen}),
         }
 
     def _learning_from(
@@ -1292,16 +1258,10 @@ class Fleet(Generic[P]):
         if len(holds) != n or len(anchor) != n:
             raise InvalidInput("snapshot does not match the fleet's vehicles")
         baseline = data["baseline"]
-        reservoir = deque((decode(p) for p in data["reservoir"]), maxlen=policy.reservoir)
-        others: deque[tuple[str, ...]] = deque(maxlen=policy.reservoir)
-        if members is not None:
-            others.extend(tuple(str(k) for k in o) for o in data["others"])
-            if len(others) != len(reservoir):
-                raise InvalidInput("snapshot needs the other types of every reservoir target")
         return Learning(
             holds=holds,
             anchor=anchor,
-            reservoir=reservoir,
+            reservoir=deque((decode(p) for p in data["reservoir"]), maxlen=policy.reservoir),
             epoch=int(data["epoch"]),
             next_consolidation=int(data["next_consolidation"]),
             baseline=None if baseline is None else float(baseline),
@@ -1314,7 +1274,6 @@ class Fleet(Generic[P]):
             hastened_at=int(data.get("hastened_at", 0)),
             vehicles=members,
             seen=int(data.get("seen", 0)),
-            others=others,
         )
 
     def restore(self, data: dict[str, Any]) -> None:

@@ -25,7 +25,6 @@ from routing_svc.sa import (
     Vehicle,
     learning_config,
 )
-from routing_svc.sa.consolidation import consolidate
 from routing_svc.types import NetPosition
 
 NET = load_network(resolve_network("drt"))
@@ -129,33 +128,18 @@ def test_a_target_feeds_each_type_it_needs_and_one_for_any_vehicle_none(
     assert fleet.state.targets == len(targets)
 
 
-def closest_times(
-    space: RoadSpace, fleet: Fleet[NetPosition], kind: str, targets: list[NetPosition]
-) -> list[float]:
-    """Per target, the time of the closest reference of ``kind`` (speeds are 1)."""
-    mine = [p for v, p in fleet.positions.items() if v.startswith(kind)]
-    return [float(t) for t in space.cost_matrix(mine, targets).min(axis=0)]
-
-
-def test_a_target_of_several_types_is_priced_by_its_last_arrival(
+def test_a_target_of_several_types_tests_each_at_its_closest_reference(
     space: RoadSpace, config: FleetConfig
 ) -> None:
     fleet = typed_fleet(space, config)
-    fleet.defer_consolidations = True
-    both = [z for z, _ in stream(12, POLICY.first)]
-    (first, *_) = both
-    arrival = {kind: closest_times(space, fleet, kind, [first])[0] for kind in TYPES}
-    fleet.observe(first, ["A", "B"])
-    for learning in fleet.state.type_learning.values():
-        # the shift test sees the target's cost: its last arrival
-        assert learning.block_cost == pytest.approx(ROUTING.cost(max(arrival.values())), rel=1e-12)
-    for z in both[1:]:
-        fleet.observe(z, ["A", "B"])
-    job = fleet.consolidation_job()  # both types are due: A's first
-    assert job is not None and job.key[0] == 0 and job.reservoir == tuple(both)
-    # A's consolidation prices each target from B's references as they are now
-    assert job.floors == pytest.approx(closest_times(space, fleet, "B", both), rel=1e-12)
-    assert list(fleet.state.type_learning["A"].others) == [("B",)] * len(both)
+    (z, _), *_ = stream(10, 1)
+    references = dict(fleet.positions)
+    fleet.observe(z, ["A", "B"])
+    for kind, learning in fleet.state.type_learning.items():
+        mine = [p for vid, p in references.items() if vid.startswith(kind)]
+        closest = float(space.cost_matrix(mine, [z]).min())
+        assert learning.block_size == 1
+        assert learning.block_cost == pytest.approx(ROUTING.cost(closest), rel=1e-12)
 
 
 def test_one_consolidation_a_target_the_other_type_stays_due(
@@ -296,25 +280,3 @@ def test_a_stored_config_keeps_the_learning_it_was_created_with(
         assert fleet.observe(z, requires).consolidation is None  # held steps only, as then
     with pytest.raises(InvalidInput, match="per type"):
         FleetConfig(objective=ROUTING, schedule=config.schedule, per_type=True)
-
-
-def test_floors_price_a_consolidation_by_the_last_arrival(space: RoadSpace) -> None:
-    reservoir = [z for z, _ in stream(13, 300)]
-    positions = [p for _, p in starts("A")]
-
-    def solve(floors: list[float] | None) -> Consolidation[NetPosition]:
-        return consolidate(
-            space, positions, positions, reservoir, power=1.0, speed=1.0, confidence=1.0,
-            updates=(0, 0, 0), fresh=300, floors=floors,
-        )  # fmt: skip
-
-    assert solve([0.0] * 300) == solve(None)
-    floors = [float(f) for f in np.random.default_rng(0).uniform(0.0, 900.0, 300)]
-    now = space.cost_matrix(positions, reservoir).min(axis=0)
-    floored = solve(floors)
-    assert floored.sample_before == pytest.approx(float(np.maximum(now, floors).mean()), rel=1e-12)
-    # a floor beyond every trip: no reference can do better, nothing is taken
-    stuck = solve([1e9] * 300)
-    assert not stuck.accepted and stuck.sample_before == stuck.sample_after == 1e9
-    with pytest.raises(InvalidInput, match="one floor per reservoir target"):
-        solve([0.0])
