@@ -21,8 +21,8 @@ chooses whether the mover is the closest reference of all vehicles (the
 paper's) or of the available ones. Under ``consolidating`` the held step acts
 on that mover's reference and consolidations on all references, as before
 (references are where vehicles wait when idle, busy or not); a fleet of several
-types consolidates each type's references on the targets that needed one vehicle
-of that type (:attr:`Fleet.learns_per_type`).
+types consolidates each type's references on the targets that needed that type
+(:attr:`Fleet.learns_per_type`).
 
 Three rules (:class:`Rule`): the paper's step alone; the paper's step with the
 backward probe; and ``consolidating``, the paper's step held at junctions
@@ -291,7 +291,7 @@ class Learning(Generic[P]):
     :attr:`FleetState.type_learning`), whose counts are :attr:`seen`. ``holds`` and
     ``anchor`` are in this order."""
     seen: int = 0
-    """A type group's targets: those that needed exactly one vehicle, of its type."""
+    """A type group's targets: those that needed its type."""
 
 
 class Dispatch(NamedTuple, Generic[P]):
@@ -459,11 +459,12 @@ class Fleet(Generic[P]):
 
         Objective (11) of targets that each need one vehicle of one type is a sum of
         one p-median per type, so each type's vehicles consolidate on the recent
-        targets that needed their type, on their own clock (:attr:`Learning.seen`). A
-        fleet learns so under ``consolidating`` (with :attr:`FleetConfig.per_type`) when
-        it has several types, each type's vehicles share one speed, and it has no
-        stands (their capacities are shared between types); other targets make held
-        steps only.
+        targets that needed their type, on their own clock (:attr:`Learning.seen`); a
+        target of several types feeds each (for it, the per-type p-medians bound
+        objective (11) from above). A fleet learns so under ``consolidating`` (with
+        :attr:`FleetConfig.per_type`) when it has several types, each type's vehicles
+        share one speed, and it has no stands (their capacities are shared between
+        types); targets for any one vehicle make held steps only.
         """
         return self._type_groups is not None
 

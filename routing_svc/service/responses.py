@@ -350,7 +350,8 @@ class TargetResult(Answer):
         default=None,
         description="Present when the target started a consolidation: its `positions` "
         "are the new references of the vehicles it moved, all of the fleet's in id order, "
-        "or, for a fleet that learns per type, those of `vehicles` (the target's type).",
+        "or, for a fleet that learns per type, those of `vehicles` (one type the target "
+        "needed).",
     )
     backed_off: list[BackedOff]
     cost: Number

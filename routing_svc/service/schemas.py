@@ -171,7 +171,7 @@ class FleetSpec(Strict):
                 description="Learning rule: 'consolidating' (held steps of eq. (10) and "
                 "consolidations of recent targets; the default when each type's vehicles "
                 "share one speed, and, with several types, there are no stands: then each "
-                "type consolidates on the targets that need one vehicle of it), 'probe' "
+                "type consolidates on the targets that need it), 'probe' "
                 "(eq. (10) with the backward probe; the default for the other fleets) or "
                 "'paper' (eq. (10) alone). Without a rule, a 'probe' value or annealing "
                 "chooses the probe rule (a probe of 0: the paper's), as before.",
