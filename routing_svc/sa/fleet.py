@@ -285,13 +285,12 @@ class Learning(Generic[P]):
     run: ShiftRun = NO_SHIFT_RUN
     """The blocks in a row that exceeded the shift ratio: their costs' sum, their
     squares' sum and their size (:meth:`ConsolidationPolicy.starts_epoch`)."""
-    vehicles: tuple[int, ...] | None = None
-    """The vehicles (fleet indices) this state learns for: ``None``, the whole fleet
-    (its counts are the fleet's targets); else one type's vehicles (a type group:
-    :attr:`FleetState.type_learning`), whose counts are :attr:`seen`. ``holds`` and
-    ``anchor`` are in this order."""
+    vehicles: tuple[int, ...] = ()
+    """The vehicles (fleet indices) this state learns for, in the order of ``holds``
+    and ``anchor``: the whole fleet's, or one type's (:attr:`FleetState.type_learning`)."""
     seen: int = 0
-    """A type group's targets: those that needed its type."""
+    """One type's: the targets that needed its type, the counts it schedules by (the
+    whole fleet's state schedules by the fleet's targets)."""
 
 
 class Dispatch(NamedTuple, Generic[P]):
@@ -363,6 +362,7 @@ class Fleet(Generic[P]):
     _any_one: Requirement = field(init=False, repr=False)
     _identical: bool = field(init=False, repr=False)
     _type_groups: dict[str, tuple[int, ...]] | None = field(init=False, repr=False)
+    _slot: tuple[int, ...] = field(init=False, repr=False)
     _probe_cache: _ProbeCache[P] | None = field(init=False, repr=False, default=None)
     _compiled: tuple[object, FleetConfig, SingleTargetServing[P] | None] | None = field(
         init=False, repr=False, default=None
@@ -411,12 +411,19 @@ class Fleet(Generic[P]):
             np.all(self._speeds == self._speeds[0])
         )
         self._type_groups = self._groups_by_type()
+        slot = list(range(n))
+        for members in (self._type_groups or {}).values():
+            for local, i in enumerate(members):
+                slot[i] = local
+        self._slot = tuple(slot)
         policy = self.config.consolidation
         if policy is None:
             return
         if self._type_groups is None:
             if self.state.learning is None:
-                self.state.learning = self._new_learning(policy, None, self.state.targets)
+                self.state.learning = self._new_learning(
+                    policy, tuple(range(n)), self.state.targets
+                )
         elif not self.state.type_learning:
             self.state.type_learning = {
                 kind: self._new_learning(policy, members, 0)
@@ -424,13 +431,12 @@ class Fleet(Generic[P]):
             }
 
     def _new_learning(
-        self, policy: ConsolidationPolicy, members: tuple[int, ...] | None, now: int
+        self, policy: ConsolidationPolicy, members: tuple[int, ...], now: int
     ) -> Learning[P]:
-        """A fresh learning state for ``members`` (``None``: the whole fleet) at count ``now``."""
-        indices = range(len(self.vehicles)) if members is None else members
+        """A fresh learning state for the vehicles ``members`` at count ``now``."""
         return Learning(
-            holds=[None] * len(indices),
-            anchor=[self.state.positions[i] for i in indices],
+            holds=[None] * len(members),
+            anchor=[self.state.positions[i] for i in members],
             reservoir=deque(maxlen=policy.reservoir),
             epoch=now,
             next_consolidation=now + policy.first,
@@ -754,7 +760,7 @@ class Fleet(Generic[P]):
         if recorded is not None and recorded_for is None and len(fed) > 1:
             raise ReplayMismatch("a consolidation recorded for several types names no vehicles")
         for learning, cost in fed:  # one consolidation at most per target: the first due
-            if learning.vehicles is not None:
+            if self._type_groups is not None:
                 learning.seen += 1
             ids = self._group_ids(learning)
             free = consolidation is None
@@ -812,30 +818,22 @@ class Fleet(Generic[P]):
 
     def _learning_of(self, vehicle: int) -> tuple[Learning[P], int]:
         """The learning state that holds ``vehicle``, and its index there."""
-        if self.state.learning is not None:
-            return self.state.learning, vehicle
-        kept = self.state.type_learning[self._types[vehicle]]
-        assert kept.vehicles is not None
-        return kept, kept.vehicles.index(vehicle)
-
-    def _members(self, learning: Learning[P]) -> Sequence[int]:
-        """The fleet indices of the vehicles ``learning`` learns for."""
-        return range(len(self.vehicles)) if learning.vehicles is None else learning.vehicles
+        kept = self.state.learning
+        if kept is None:
+            kept = self.state.type_learning[self._types[vehicle]]
+        return kept, self._slot[vehicle]
 
     def _group_positions(self, learning: Learning[P]) -> list[P]:
         """The references of the vehicles ``learning`` learns for, in its order."""
-        positions = self.state.positions
-        if learning.vehicles is None:
-            return positions
-        return [positions[i] for i in learning.vehicles]
+        return [self.state.positions[i] for i in learning.vehicles]
 
     def _group_ids(self, learning: Learning[P]) -> tuple[str, ...]:
         """The ids of the vehicles ``learning`` learns for, in its order."""
-        return tuple(self._ids[i] for i in self._members(learning))
+        return tuple(self._ids[i] for i in learning.vehicles)
 
     def _clock(self, learning: Learning[P]) -> int:
-        """The target count ``learning`` schedules by: the fleet's, or its group's."""
-        return self.state.targets if learning.vehicles is None else learning.seen
+        """The target count ``learning`` schedules by: the fleet's, or its type's."""
+        return self.state.targets if self._type_groups is None else learning.seen
 
     def _learn_from(
         self,
@@ -895,7 +893,7 @@ class Fleet(Generic[P]):
         else:
             job = self._job(learning)
             done = job.solve()
-        members = self._members(learning)
+        members = learning.vehicles
         if len(done.positions) != len(members) or len(done.updates) != len(members):
             raise ReplayMismatch("a recorded consolidation does not match the fleet's vehicles")
         if done.accepted:
@@ -966,7 +964,7 @@ class Fleet(Generic[P]):
         fleet's counts."""
         policy, state = self.config.consolidation, self.state
         assert policy is not None
-        members = self._members(learning)
+        members = learning.vehicles
         return ConsolidationJob(
             key=self._key(learning),
             apply_by=self._scheduled(learning, policy)[1],
@@ -993,8 +991,7 @@ class Fleet(Generic[P]):
     def _key(self, learning: Learning[P]) -> ConsolidationKey:
         """The key of ``learning``'s consolidation due now (or next): its first vehicle,
         its epoch and the count it falls due at."""
-        first = 0 if learning.vehicles is None else learning.vehicles[0]
-        return (first, learning.epoch, learning.next_consolidation)
+        return (learning.vehicles[0], learning.epoch, learning.next_consolidation)
 
     def replay_observe(
         self,
@@ -1239,18 +1236,20 @@ class Fleet(Generic[P]):
                 else {}
             ),
             **({"hastened_at": learning.hastened_at} if policy.hasten is not None else {}),
-            **({} if learning.vehicles is None else {"seen": learning.seen}),
+            **({} if self._type_groups is None else {"seen": learning.seen}),
         }
 
     def _learning_from(
         self, data: dict[str, Any], members: tuple[int, ...] | None = None
     ) -> Learning[P]:
-        """:meth:`_learning_dict` read back, for ``members`` (``None``: the whole fleet)."""
+        """:meth:`_learning_dict` read back, for the vehicles ``members`` (default: all)."""
         policy = self.config.consolidation
         if policy is None:
             raise InvalidInput("snapshot has learning state for a fleet without the rule")
         decode = self.space.decode
-        n = len(self.vehicles) if members is None else len(members)
+        if members is None:
+            members = tuple(range(len(self.vehicles)))
+        n = len(members)
         holds: list[Hold[P] | None] = [
             None if h is None else Hold(decode(h["exit"]), float(h["pressure"]))
             for h in data["holds"]

@@ -1497,7 +1497,6 @@ def _hold_keeper(fleet: Fleet[Any], vehicle: int) -> tuple[Learning[Any], int]:
     if fleet.state.learning is not None:
         return fleet.state.learning, vehicle
     kept = fleet.state.type_learning[fleet.vehicles[vehicle].type]
-    assert kept.vehicles is not None
     return kept, kept.vehicles.index(vehicle)
 
 
