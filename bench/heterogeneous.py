@@ -92,7 +92,7 @@ def job(args: Job) -> dict[str, Any]:
     net, n, seed, targets, mix_name = args
     mix = MIXES[mix_name]
     t0 = time.perf_counter()
-    inst = instance(net, n, seed)
+    inst = instance(net, n, seed, shift=False)
     space = inst.space
     types = [TYPES[0]] * (n // 2) + [TYPES[1]] * (n - n // 2)
     speeds = np.ones(n)

@@ -124,7 +124,10 @@ def instance(
     spec: str = DEFAULT_DEMAND,
     spread: float | None = None,
     cost: CostKind = "length",
+    shift: bool = True,
 ) -> Instance:
+    """The instance of ``net`` for ``n`` vehicles and ``seed``; ``shift=False`` leaves
+    the shifted demand unsolved (it is then the demand itself)."""
     network = load_network(network_file(net))
     space = RoadSpace(network, cost=cost)
     recipe = parse_demand_spec(spec)
@@ -139,10 +142,10 @@ def instance(
             f"{net.partition('=')[0]}/{n}: the optimum costs 0 (the vehicles can stand on "
             "every demand atom): there is no relative gap to measure"
         )
-    if isinstance(recipe.form, Hotspots):  # the hotspots move: new centres
+    if shift and isinstance(recipe.form, Hotspots):  # the hotspots move: new centres
         shifted = network_demand(network, recipe, rng=np.random.default_rng([seed, 2]))
         shifted_optimum, shifted_matrix, shifted_sites = optimum_of(space, shifted, n)
-    else:  # a demand without centres to move has no shift
+    else:  # a demand without centres to move (or not asked to) has no shift
         shifted, shifted_optimum, shifted_matrix, shifted_sites = demand, optimum, matrix, sites
     edges = np.random.default_rng([seed, 3]).choice(  # distinct edges while there are enough
         network.n_edges, size=n, replace=n > network.n_edges
