@@ -452,12 +452,7 @@ class Fleet(Generic[P]):
             return None
         if config.stands is not None:
             return None
-        groups: dict[str, list[int]] = {}
-        for i, kind in enumerate(self._types):
-            groups.setdefault(kind, []).append(i)
-        if any(len({float(self._speeds[i]) for i in members}) > 1 for members in groups.values()):
-            return None
-        return {kind: tuple(members) for kind, members in sorted(groups.items())}
+        return type_groups(self._types, self._speeds.tolist())
 
     @property
     def learns_per_type(self) -> bool:
@@ -1326,6 +1321,25 @@ class Fleet(Generic[P]):
             return self._index[vehicle_id]
         except KeyError:
             raise NotFound(f"unknown vehicle {vehicle_id!r}") from None
+
+
+def type_groups(types: Sequence[str], speeds: Sequence[float]) -> dict[str, tuple[int, ...]] | None:
+    """Each type's vehicles (indices), types in name order, when every type's vehicles
+    share one speed; else ``None`` (such a type cannot consolidate as one p-median)."""
+    groups: dict[str, list[int]] = {}
+    for i, kind in enumerate(types):
+        groups.setdefault(kind, []).append(i)
+    if any(len({float(speeds[i]) for i in members}) > 1 for members in groups.values()):
+        return None
+    return {kind: tuple(members) for kind, members in sorted(groups.items())}
+
+
+def can_consolidate(types: Sequence[str], speeds: Sequence[float], *, stands: bool) -> bool:
+    """Whether a fleet of these vehicles learns by consolidations under ``consolidating``
+    (with :attr:`FleetConfig.per_type`): one speed per type, and, with several types,
+    no stands (:attr:`Fleet.learns_per_type`)."""
+    groups = type_groups(types, speeds)
+    return groups is not None and (len(groups) == 1 or not stands)
 
 
 def prior_counts(

@@ -16,6 +16,7 @@ from pydantic import (
 )
 
 from routing_svc.sa import DEFAULT_RULE
+from routing_svc.sa.fleet import can_consolidate
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Identifier = Annotated[
@@ -239,20 +240,19 @@ class FleetSpec(Strict):
     def learning_rule(self) -> str:
         """The rule asked for: ``rule``; else the probe rule when a probe window or
         annealing is given (the paper's for a window of 0); else the default for a
-        fleet that can consolidate (one speed per type; several types without stands,
-        :attr:`~routing_svc.sa.fleet.Fleet.learns_per_type`), and the probe rule for
-        the others."""
+        fleet that can consolidate (:func:`~routing_svc.sa.fleet.can_consolidate`), and
+        the probe rule for the others."""
         if self.rule is not None:
             return self.rule
         if self.probe is not None:
             return "probe" if self.probe > 0.0 else "paper"
         if self.annealing is not None:
             return "probe"
-        speeds: dict[str, set[float]] = {}
-        for v in self.vehicles:
-            speeds.setdefault(v.type, set()).add(v.speed)
-        one_speed_per_type = all(len(s) == 1 for s in speeds.values())
-        consolidates = one_speed_per_type and (len(speeds) == 1 or self.stands is None)
+        consolidates = can_consolidate(
+            [v.type for v in self.vehicles],
+            [v.speed for v in self.vehicles],
+            stands=self.stands is not None,
+        )
         return DEFAULT_RULE.value if consolidates else "probe"
 
     @field_validator("vehicles")

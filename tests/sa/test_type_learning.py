@@ -25,6 +25,7 @@ from routing_svc.sa import (
     Vehicle,
     learning_config,
 )
+from routing_svc.sa.fleet import can_consolidate, type_groups
 from routing_svc.types import NetPosition
 
 NET = load_network(resolve_network("drt"))
@@ -280,3 +281,11 @@ def test_a_stored_config_keeps_the_learning_it_was_created_with(
         assert fleet.observe(z, requires).consolidation is None  # held steps only, as then
     with pytest.raises(InvalidInput, match="per type"):
         FleetConfig(objective=ROUTING, schedule=config.schedule, per_type=True)
+
+
+def test_which_fleets_can_consolidate() -> None:
+    assert can_consolidate(["a", "a"], [1.0, 1.0], stands=True)  # identical, stands or not
+    assert can_consolidate(["a", "b"], [1.0, 2.0], stands=False)  # one speed per type
+    assert not can_consolidate(["a", "b"], [1.0, 2.0], stands=True)  # types share stands
+    assert not can_consolidate(["a", "a", "b"], [1.0, 2.0, 1.0], stands=False)
+    assert type_groups(["b", "a", "b"], [1.0, 1.0, 1.0]) == {"a": (1,), "b": (0, 2)}
