@@ -471,6 +471,7 @@ def consolidate(
     tested_refit: bool = True,
     stands: StandSet[P] | None = None,
     shakes: int = 0,
+    floors: Sequence[float] | None = None,
 ) -> Consolidation[P]:
     """Solve the reservoir without each fold, test on that fold, solve all if it pays.
 
@@ -513,15 +514,30 @@ def consolidate(
     shakes : int
         Shakes without gain of the accepted solve's neighbourhood search
         (:attr:`ConsolidationPolicy.shakes`).
+    floors : sequence of float, optional
+        Per reservoir target, a cost ``f`` below which it is not served
+        (:meth:`ConsolidationJob.floors`: the last arrival of the other types it
+        needed). A target then costs ``max(c, f)`` from references ``c`` away: the
+        term of objective (11) with the other types fixed. Every fit is the p-median
+        of the plain costs improved by the fast interchange on these
+        (:func:`fitted`); the test and the costs recorded use these. Not with
+        ``stands``.
     """
     p = len(positions)
     if len(reservoir) < 2 or len(anchor) != p or len(updates) != p:
         raise InvalidInput("a consolidation needs two targets and one anchor per vehicle")
     if isinstance(folds, bool) or not isinstance(folds, int) or folds < 2:
         raise InvalidInput(f"a consolidation needs at least 2 folds, got {folds!r}")
-    targets = list(dict.fromkeys(reservoir))
-    column = {z: j for j, z in enumerate(targets)}
-    places = np.fromiter((column[z] for z in reservoir), dtype=np.int64, count=len(reservoir))
+    if floors is not None and (len(floors) != len(reservoir) or stands is not None):
+        raise InvalidInput("floors need one value per reservoir target, and no stands")
+    if floors is not None and not all(math.isfinite(f) and f >= 0.0 for f in floors):
+        raise InvalidInput("floors must be finite and >= 0")
+    priced = floors is not None and any(f > 0.0 for f in floors)
+    entries: list[Any] = list(zip(reservoir, floors or (), strict=True)) if priced else [*reservoir]
+    keys = list(dict.fromkeys(entries))  # a column per target, and per floor when priced
+    targets = [z for z, _ in keys] if priced else keys
+    column = {z: j for j, z in enumerate(keys)}
+    places = np.fromiter((column[z] for z in entries), dtype=np.int64, count=len(reservoir))
     parts = [
         np.bincount(places[f::folds], minlength=len(targets)).astype(np.float64)
         for f in range(folds)
@@ -529,8 +545,9 @@ def consolidate(
     weight = np.sum(parts, axis=0)
     first_fresh = len(reservoir) - min(max(fresh, 0), len(reservoir))
     if stands is None:
-        stride = -(-len(targets) // MAX_SITE_TARGETS)
-        sites = space.candidate_references(targets[::stride], [*positions, *anchor])
+        distinct = list(dict.fromkeys(targets)) if priced else targets
+        stride = -(-len(distinct) // MAX_SITE_TARGETS)
+        sites = space.candidate_references(distinct[::stride], [*positions, *anchor])
         row = {s: i for i, s in enumerate(sites)}
         actual = np.array([row[x] for x in positions], dtype=np.int64)
         current = _distinct(actual, len(sites))
@@ -544,6 +561,9 @@ def consolidate(
     costs = np.asarray(space.cost_matrix(sites, targets), dtype=np.float64)  # a new matrix
     costs /= speed
     costs **= power
+    plain = costs
+    if priced:
+        costs = np.maximum(plain, np.array([f for _, f in keys]))
     now = costs[actual].min(axis=0)
     before = float(weight @ now) / float(weight.sum())
 
@@ -551,7 +571,7 @@ def consolidate(
         """Solve the whole reservoir and take its best."""
 
         def solved(_: int) -> IntArray:
-            return searched(costs, weight, best_fit(costs, weight, [current, anchored]), shakes)
+            return fitted(plain, costs, weight, [current, anchored], shakes)
 
         if stands is None:
             ordered = _pair(current, solved(p))
@@ -586,7 +606,7 @@ def consolidate(
     folds_tested = [(part, test, test > 0) for part, test in zip(parts, tests, strict=True)]
     folds_tested = [fold for fold in folds_tested if fold[2].any()]
     challengers = _fold_fits(
-        costs, weight, [part for part, _, _ in folds_tested], [current, anchored]
+        plain, costs, weight, [part for part, _, _ in folds_tested], [current, anchored]
     )
     differences, weights, tested_now = [], [], []
     for (_, test, tested), challenger in zip(folds_tested, challengers, strict=True):
@@ -642,6 +662,30 @@ class ConsolidationJob(Generic[P]):
     tested_refit: bool
     stands: StandSet[P] | None
     shakes: int
+    partners: tuple[tuple[str, ...], ...] = ()
+    """Per reservoir target, the other types it needed (:attr:`Learning.partners`)."""
+    others: tuple[tuple[str, tuple[P, ...], float], ...] = ()
+    """The fleet's other types: each one's name, current references and speed factor."""
+
+    def floors(self) -> list[float] | None:
+        """Per reservoir target, ``c(T)`` of the last arrival of the other types it
+        needed, each from its closest current reference (0 for a target of this type
+        alone; ``None`` when no target needed another type)."""
+        need = [i for i, kinds in enumerate(self.partners) if kinds]
+        if not need or not self.others:
+            return None
+        places = list(dict.fromkeys(self.reservoir[i] for i in need))
+        column = {z: j for j, z in enumerate(places)}
+        times = {
+            kind: np.asarray(self.space.cost_matrix(list(refs), places)).min(axis=0) / speed
+            for kind, refs, speed in self.others
+        }
+        out = [0.0] * len(self.reservoir)
+        for i in need:
+            j = column[self.reservoir[i]]
+            last = max((float(times[k][j]) for k in self.partners[i] if k in times), default=0.0)
+            out[i] = last**self.power
+        return out
 
     def solve(self) -> Consolidation[P]:
         """:func:`consolidate` on the copied inputs."""
@@ -660,6 +704,7 @@ class ConsolidationJob(Generic[P]):
             tested_refit=self.tested_refit,
             stands=self.stands,
             shakes=self.shakes,
+            floors=self.floors(),
         )
 
 
@@ -744,14 +789,31 @@ def best_fit(costs: FloatArray, weight: FloatArray, starts: list[IntArray]) -> I
     return candidates[int(np.argmin(values))]
 
 
+def fitted(
+    plain: FloatArray, priced: FloatArray, weight: FloatArray, starts: list[IntArray], shakes: int
+) -> IntArray:
+    """The p-median fit of ``weight`` on the ``plain`` costs (:func:`best_fit`, then
+    :func:`searched`), improved by the fast interchange on the ``priced`` costs (the
+    last arrival of targets of several types) when they differ."""
+    sites = searched(plain, weight, best_fit(plain, weight, starts), shakes)
+    if priced is plain:
+        return sites
+    seen, seen_weight = _weighed(priced, weight)
+    return fast_interchange(np.ascontiguousarray(seen), seen_weight, sites)
+
+
 def _fold_fits(
-    costs: FloatArray, weight: FloatArray, parts: list[FloatArray], starts: list[IntArray]
+    plain: FloatArray,
+    priced: FloatArray,
+    weight: FloatArray,
+    parts: list[FloatArray],
+    starts: list[IntArray],
 ) -> list[IntArray]:
-    """:func:`best_fit` of ``weight`` without each part, the parts solved side by side on
+    """:func:`fitted` of ``weight`` without each part, the parts solved side by side on
     threads (the kernels release the GIL; each solve is the same as alone)."""
 
     def fit(part: FloatArray) -> IntArray:
-        return best_fit(costs, weight - part, starts)
+        return fitted(plain, priced, weight - part, starts, 0)
 
     workers = min(len(parts), os.cpu_count() or 1)
     if workers < 2:

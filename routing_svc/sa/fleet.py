@@ -291,6 +291,9 @@ class Learning(Generic[P]):
     seen: int = 0
     """One type's: the targets that needed its type, the counts it schedules by (the
     whole fleet's state schedules by the fleet's targets)."""
+    partners: deque[tuple[str, ...]] = field(default_factory=deque)
+    """One type's: per reservoir target, in its order, the other types it needed (empty
+    for a target of this type alone); empty for the whole fleet's."""
 
 
 class Dispatch(NamedTuple, Generic[P]):
@@ -438,6 +441,7 @@ class Fleet(Generic[P]):
             holds=[None] * len(members),
             anchor=[self.state.positions[i] for i in members],
             reservoir=deque(maxlen=policy.reservoir),
+            partners=deque(maxlen=policy.reservoir),
             epoch=now,
             next_consolidation=now + policy.first,
             accepted_at=now,
@@ -461,11 +465,12 @@ class Fleet(Generic[P]):
         Objective (11) of targets that each need one vehicle of one type is a sum of
         one p-median per type, so each type's vehicles consolidate on the recent
         targets that needed their type, on their own clock (:attr:`Learning.seen`); a
-        target of several types feeds each (for it, the per-type p-medians bound
-        objective (11) from above). A fleet learns so under ``consolidating`` (with
-        :attr:`FleetConfig.per_type`) when it has several types, each type's vehicles
-        share one speed, and it has no stands (their capacities are shared between
-        types); targets for any one vehicle make held steps only.
+        target of several types feeds each, and a type's consolidation prices it by its
+        last arrival with the other types' references fixed (``floors`` of
+        :func:`~routing_svc.sa.consolidation.consolidate`). A fleet learns so under
+        ``consolidating`` (with :attr:`FleetConfig.per_type`) when it has several types,
+        each type's vehicles share one speed, and it has no stands (their capacities are
+        shared between types); targets for any one vehicle make held steps only.
         """
         return self._type_groups is not None
 
@@ -751,17 +756,25 @@ class Fleet(Generic[P]):
         state.targets += 1
         consolidation: Consolidation[P] | None = None
         consolidated: tuple[str, ...] = ()
-        fed = self._fed_by(requires, found, dispatch.objective) if self._consolidates() else []
+        fed = self._fed_by(requires, dispatch.objective) if self._consolidates() else []
         if recorded is not None and recorded_for is None and len(fed) > 1:
             raise ReplayMismatch("a consolidation recorded for several types names no vehicles")
-        for learning, cost in fed:  # one consolidation at most per target: the first due
+        for learning, cost, partners in fed:  # one consolidation at most: the first due
             if self._type_groups is not None:
                 learning.seen += 1
             ids = self._group_ids(learning)
             free = consolidation is None
             mine = recorded if free and (recorded_for is None or recorded_for == ids) else None
             done = self._learn_from(
-                learning, policy, target, cost, mine, replaying, solved, may_consolidate=free
+                learning,
+                policy,
+                target,
+                cost,
+                mine,
+                replaying,
+                solved,
+                partners=partners,
+                may_consolidate=free,
             )
             if done is not None:
                 consolidation, consolidated = done, ids
@@ -783,32 +796,25 @@ class Fleet(Generic[P]):
         return list(self.state.type_learning.values())
 
     def _fed_by(
-        self, requires: Sequence[str] | None, found: Assignment[P], cost: float
-    ) -> list[tuple[Learning[P], float]]:
-        """The learning states a target feeds, each with the cost its shift test sees.
+        self, requires: Sequence[str] | None, cost: float
+    ) -> list[tuple[Learning[P], float, tuple[str, ...]]]:
+        """The learning states a target feeds, each with the cost its shift test sees
+        (the target's ``cost``, its last arrival) and the other types it needs.
 
-        The whole fleet's, at the target's cost ``cost``, for a target that needs any
-        one vehicle. For a fleet that learns per type (:attr:`learns_per_type`), each
-        type the target needs, in name order: at ``cost`` when it needs one vehicle,
-        else at the cost of the closest reference of that type (``found``, the search
-        of references). A consolidation of a type fits its references to all the
-        targets that needed it, a bound on objective (11) of the targets that needed
-        several (their cost is the last arrival). Other targets feed none.
+        The whole fleet's, for a target that needs any one vehicle. For a fleet that
+        learns per type (:attr:`learns_per_type`), each type the target needs, in name
+        order; a consolidation of a type prices a target that needed other types too by
+        its last arrival, theirs from their current references
+        (:meth:`ConsolidationJob.floors`). Other targets feed none.
         """
         if self._type_groups is None:
             learning = self.state.learning
-            return [] if requires or learning is None else [(learning, cost)]
+            return [] if requires or learning is None else [(learning, cost, ())]
         if not requires:
             return []
-        if len(requires) == 1:
-            return [(self.state.type_learning[requires[0]], cost)]
-        fastest: dict[str, float] = {}
-        for i, time in zip(found.served_by, found.times, strict=True):
-            kind = self._types[i]
-            fastest[kind] = min(time, fastest.get(kind, math.inf))
-        objective = self.config.objective
+        kinds = sorted(set(requires))
         return [
-            (self.state.type_learning[k], objective.cost(t)) for k, t in sorted(fastest.items())
+            (self.state.type_learning[k], cost, tuple(o for o in kinds if o != k)) for k in kinds
         ]
 
     def _learning_of(self, vehicle: int) -> tuple[Learning[P], int]:
@@ -840,6 +846,7 @@ class Fleet(Generic[P]):
         replaying: bool,
         solved: Solved[P] | None,
         *,
+        partners: tuple[str, ...] = (),
         may_consolidate: bool = True,
     ) -> Consolidation[P] | None:
         """Keep ``target``, run the shift test on its ``cost`` and consolidate when due
@@ -852,6 +859,8 @@ class Fleet(Generic[P]):
         state = self.state
         now = self._clock(learning)
         learning.reservoir.append(target)
+        if self._type_groups is not None:
+            learning.partners.append(partners)
         learning.block_cost += cost
         learning.block_squares += cost * cost
         learning.block_size += 1
@@ -866,6 +875,9 @@ class Fleet(Generic[P]):
                 recent = list(learning.reservoir)[-policy.block :]
                 learning.reservoir.clear()
                 learning.reservoir.extend(recent)
+                kept = list(learning.partners)[-policy.block :]
+                learning.partners.clear()
+                learning.partners.extend(kept)
                 learning.epoch = now
                 learning.next_consolidation = now + policy.first
                 learning.baseline = None
@@ -981,6 +993,12 @@ class Fleet(Generic[P]):
             tested_refit=policy.tested_refit,
             stands=self.config.stands,
             shakes=policy.shakes,
+            partners=tuple(learning.partners),
+            others=tuple(
+                (kind, tuple(self._group_positions(other)), float(self._speeds[other.vehicles[0]]))
+                for kind, other in self.state.type_learning.items()
+                if other is not learning
+            ),
         )
 
     def _key(self, learning: Learning[P]) -> ConsolidationKey:
@@ -1232,6 +1250,11 @@ class Fleet(Generic[P]):
             ),
             **({"hastened_at": learning.hastened_at} if policy.hasten is not None else {}),
             **({} if self._type_groups is None else {"seen": learning.seen}),
+            **(
+                {"partners": [list(kinds) for kinds in learning.partners]}
+                if any(learning.partners)
+                else {}
+            ),
         }
 
     def _learning_from(
@@ -1253,10 +1276,16 @@ class Fleet(Generic[P]):
         if len(holds) != n or len(anchor) != n:
             raise InvalidInput("snapshot does not match the fleet's vehicles")
         baseline = data["baseline"]
+        partners = [tuple(str(k) for k in kinds) for kinds in data.get("partners", ())]
+        if "partners" not in data:  # a snapshot without them: no target needed another type
+            partners = [() for _ in data["reservoir"]]
+        if len(partners) != len(data["reservoir"]):
+            raise InvalidInput("snapshot's partners do not match its reservoir")
         return Learning(
             holds=holds,
             anchor=anchor,
             reservoir=deque((decode(p) for p in data["reservoir"]), maxlen=policy.reservoir),
+            partners=deque(partners, maxlen=policy.reservoir),
             epoch=int(data["epoch"]),
             next_consolidation=int(data["next_consolidation"]),
             baseline=None if baseline is None else float(baseline),

@@ -40,6 +40,7 @@ from routing_svc.sa.fleet import Learning
 from routing_svc.sa.held_step import held_step
 from routing_svc.sa.interchange import fast_interchange
 from routing_svc.sa.requirements import build_requirement
+from routing_svc.sa.stands import StandSet
 from routing_svc.types import FloatArray, IntArray, NetPosition
 
 NET = load_network(resolve_network("drt"))
@@ -245,6 +246,60 @@ def test_consolidation_against_brute_force(
     assert done.standard_error == pytest.approx(standard_error, rel=1e-9, abs=1e-12 * before)
     assert done.gain < 0.0
     assert done.baseline == done.sample_before + done.gain
+
+
+@pytest.mark.parametrize(("p", "power", "speed"), [(2, 1.0, 1.0), (3, 1.0, 1.0), (2, 2.0, 2.5)])
+def test_targets_of_several_types_are_priced_by_their_last_arrival(
+    space: RoadSpace, p: int, power: float, speed: float
+) -> None:
+    _, targets = demand_stream(1, 10)
+    reservoir = duplicated(targets)  # each target twice: once alone, once with a partner
+    m = len(reservoir)
+    start = poor_start(p)
+    partner = targets[4]  # the other type's one reference (speed 1), amid the demand
+    arrival = service_costs(space, [partner], reservoir, power).min(axis=0)
+    floors = [float(arrival[i]) if i % 2 else 0.0 for i in range(m)]
+
+    def run(floors: list[float] | None) -> Consolidation[NetPosition]:
+        return consolidate(
+            space, start, start, reservoir, power=power, speed=speed, confidence=0.0,
+            updates=[7] * p, fresh=m, floors=floors,
+        )  # fmt: skip
+
+    def priced(positions: Sequence[NetPosition]) -> float:
+        own = service_costs(space, positions, reservoir, power, speed).min(axis=0)
+        return math.fsum(np.maximum(own, floors).tolist())
+
+    plain, done = run(None), run(floors)
+    assert run([0.0] * m) == plain  # no floor: the plain consolidation, bit for bit
+    assert done.accepted is True and done.gain < 0.0
+    assert done.sample_before == pytest.approx(priced(start) / m, rel=1e-12)
+    assert done.sample_after == pytest.approx(priced(done.positions) / m, rel=1e-12)
+    # the plain fit, improved on the last arrivals (here it moves)
+    assert priced(done.positions) < priced(plain.positions)
+    # and no swap of a reference for another candidate lowers the last arrivals' sum
+    sites = sites_of(space, reservoir, start, start)
+    assert set(done.positions) <= set(sites)
+    costs = np.maximum(service_costs(space, sites, reservoir, power, speed), floors)
+    value = priced(done.positions)
+    assert no_swap_improves(costs, [sites.index(x) for x in done.positions], value)
+
+
+@pytest.mark.parametrize(
+    ("floors", "stands"), [([0.0], False), ([-1.0] * 20, False), ([math.nan] * 20, False),
+                           ([0.0] * 20, True)],
+)  # fmt: skip
+def test_floors_must_be_one_per_target_finite_non_negative_and_without_stands(
+    space: RoadSpace, floors: list[float], stands: bool
+) -> None:
+    _, targets = demand_stream(1, 10)
+    reservoir = duplicated(targets)
+    stand_set = StandSet((NetPosition(3, 0.0), NetPosition(6, 0.0)), (1, 1)) if stands else None
+    with pytest.raises(InvalidInput, match="floors"):
+        consolidate(
+            space, poor_start(2), poor_start(2), reservoir, power=1.0, speed=1.0,
+            confidence=0.0, updates=[0, 0], fresh=20, floors=floors, stands=stand_set,
+        )  # fmt: skip
 
 
 def test_the_accepted_solve_searches_beyond_single_swaps() -> None:
@@ -596,12 +651,17 @@ def test_the_folds_solved_side_by_side_are_each_the_fold_solved_alone() -> None:
     places = np.arange(400)
     parts = [np.where(places % 4 == f, weight, 0.0) for f in range(4)]
     starts = [np.arange(8, dtype=np.int64), np.arange(60, 68, dtype=np.int64)]
-    together = consolidation_module._fold_fits(costs, weight, parts, starts)
+    together = consolidation_module._fold_fits(costs, costs, weight, parts, starts)
     alone = [consolidation_module.best_fit(costs, weight - part, starts) for part in parts]
     assert len(together) == 4
     for fit, single in zip(together, alone, strict=True):
         assert np.array_equal(fit, single)
     assert len({tuple(sorted(fit.tolist())) for fit in together}) > 1  # the folds differ
+    # priced by last arrivals: each fold's plain fit improved on them, as alone
+    priced = np.maximum(costs, np.where(places % 3 == 0, 60.0, 0.0))
+    together = consolidation_module._fold_fits(costs, priced, weight, parts, starts)
+    for fit, part, plain in zip(together, parts, alone, strict=True):
+        assert np.array_equal(fit, fast_interchange(priced, weight - part, plain))
 
 
 def record() -> Consolidation[NetPosition]:

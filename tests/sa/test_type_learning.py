@@ -6,6 +6,7 @@ fed the targets that needed its type, with the same settings.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Sequence
 
@@ -56,6 +57,11 @@ def starts(kind: str) -> list[tuple[Vehicle, NetPosition]]:
     return [
         (Vehicle(f"{kind}{i}", kind), NetPosition(offset + 11 * i, 0.0)) for i in range(TYPES[kind])
     ]
+
+
+def of_type(references: dict[str, NetPosition], kind: str) -> list[NetPosition]:
+    """The references of the vehicles of ``kind`` (their ids begin with it)."""
+    return [p for vid, p in references.items() if vid.startswith(kind)]
 
 
 def typed_fleet(space: RoadSpace, config: FleetConfig) -> Fleet[NetPosition]:
@@ -129,18 +135,52 @@ def test_a_target_feeds_each_type_it_needs_and_one_for_any_vehicle_none(
     assert fleet.state.targets == len(targets)
 
 
-def test_a_target_of_several_types_tests_each_at_its_closest_reference(
+def test_a_target_of_several_types_tests_each_at_its_last_arrival(
     space: RoadSpace, config: FleetConfig
 ) -> None:
     fleet = typed_fleet(space, config)
     (z, _), *_ = stream(10, 1)
     references = dict(fleet.positions)
     fleet.observe(z, ["A", "B"])
+    closest = {
+        kind: float(space.cost_matrix(of_type(references, kind), [z]).min()) for kind in TYPES
+    }
+    assert closest["A"] != closest["B"]
     for kind, learning in fleet.state.type_learning.items():
-        mine = [p for vid, p in references.items() if vid.startswith(kind)]
-        closest = float(space.cost_matrix(mine, [z]).min())
         assert learning.block_size == 1
-        assert learning.block_cost == pytest.approx(ROUTING.cost(closest), rel=1e-12)
+        assert learning.block_cost == pytest.approx(ROUTING.cost(max(closest.values())), rel=1e-12)
+        assert list(learning.partners) == [tuple(k for k in TYPES if k != kind)]
+
+
+def test_a_consolidation_prices_targets_of_several_types_by_the_other_types_references(
+    space: RoadSpace, config: FleetConfig
+) -> None:
+    fleet = typed_fleet(space, config)
+    fleet.defer_consolidations = True
+    targets = stream(12, 400, mixed=0.5)
+    job = None
+    for z, r in targets:
+        fleet.observe(z, r)
+        job = job or fleet.consolidation_job()
+    assert job is not None and job.key[0] == 0  # type A's (first by name)
+    mine = [(z, r) for z, r in targets if r is not None and "A" in r][: len(job.reservoir)]
+    assert list(job.reservoir) == [z for z, _ in mine]
+    assert list(job.partners) == [(("B",) if "B" in r else ()) for _, r in mine]
+    assert 0 < sum(map(bool, job.partners)) < len(mine)
+    (kind, references, speed), *rest = job.others
+    assert kind == "B" and not rest and speed == 1.0
+    assert references == tuple(of_type(fleet.positions, "B"))
+    floors = job.floors()
+    assert floors is not None
+    for z, partners, floor in zip(job.reservoir, job.partners, floors, strict=True):
+        if not partners:
+            assert floor == 0.0
+            continue
+        by_hand = min(float(space.cost_matrix([p], [z])[0, 0]) for p in references)
+        assert floor == pytest.approx(ROUTING.cost(by_hand), rel=1e-12)
+    assert job.solve() == dataclasses.replace(job).solve()  # deterministic
+    only_a = dataclasses.replace(job, partners=tuple(() for _ in job.partners))
+    assert only_a.floors() is None
 
 
 def test_one_consolidation_a_target_the_other_type_stays_due(
@@ -188,6 +228,17 @@ def test_snapshot_and_restore_go_on_as_if_never_stopped(
     run(second, targets[700:])
     assert second.positions == whole.positions
     assert second.snapshot() == whole.snapshot()
+    assert any(saved["type_learning"]["A"]["partners"])
+    older = json.loads(json.dumps(saved))  # a snapshot from before the partners were kept
+    for kept in older["type_learning"].values():
+        del kept["partners"]
+    third = typed_fleet(space, config)
+    third.restore(older)
+    for learning in third.state.type_learning.values():
+        assert list(learning.partners) == [()] * len(learning.reservoir)
+    saved["type_learning"]["B"]["partners"].pop()
+    with pytest.raises(InvalidInput, match="partners"):
+        typed_fleet(space, config).restore(saved)
     del saved["type_learning"]
     with pytest.raises(InvalidInput, match="per type"):
         typed_fleet(space, config).restore(saved)
