@@ -600,8 +600,9 @@ class Fleet(Generic[P]):
 
     def posts(self) -> list[Post[P]]:
         """Where each available vehicle should wait now (:func:`routing_svc.sa.posts.fleet_posts`),
-        on the reservoir of recent targets as the demand sample (the references themselves
-        without one); changes nothing.
+        on the reservoir of recent targets as the demand sample (of a fleet that learns per
+        type, each type's: the targets that needed it; the references themselves without
+        one); changes nothing.
 
         Raises
         ------
@@ -617,7 +618,9 @@ class Fleet(Generic[P]):
             speeds=self._speeds,
             types=self._types,
             states=self.state.vehicle_states,
-            sample=[z for learning in self._learnings() for z in learning.reservoir],
+            sample={kind: list(kept.reservoir) for kind, kept in self.state.type_learning.items()}
+            if self._type_groups is not None
+            else [z for learning in self._learnings() for z in learning.reservoir],
             power=self.config.objective.power,
         )
 

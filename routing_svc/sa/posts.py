@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Generic
 
@@ -130,7 +130,7 @@ def fleet_posts(
     speeds: FloatArray,
     types: Sequence[str],
     states: Sequence[VehicleState[P]],
-    sample: Sequence[P],
+    sample: Sequence[P] | Mapping[str, Sequence[P]],
     power: float,
 ) -> list[Post[P]]:
     """Every available vehicle's post (see the module docstring).
@@ -142,7 +142,8 @@ def fleet_posts(
     references, speeds, types, states
         Per vehicle: its reference, speed, type and live state.
     sample
-        The demand sample (targets); empty: the references themselves, one each.
+        The demand sample (targets), or one per type (the targets that needed it, for a
+        fleet that learns per type); empty: the references themselves, one each.
     power
         The objective's power ``q``, ``c(T) = T**q``.
 
@@ -151,9 +152,10 @@ def fleet_posts(
     list of Post
         One per available vehicle, in vehicle order.
     """
-    demand = list(sample) if sample else list(references)
     posts: list[Post[P]] = []
     for kind in sorted(set(types)):
+        own = sample.get(kind, ()) if isinstance(sample, Mapping) else sample
+        demand = list(own) if own else list(references)
         of_kind = [i for i, t in enumerate(types) if t == kind]
         free = [i for i in of_kind if states[i].status is Status.AVAILABLE]
         if not free:

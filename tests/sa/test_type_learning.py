@@ -7,6 +7,7 @@ fed the targets that needed its type, with the same settings.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 from collections.abc import Sequence
 
@@ -23,7 +24,9 @@ from routing_svc.sa import (
     ConsolidationPolicy,
     Fleet,
     FleetConfig,
+    Status,
     Vehicle,
+    VehicleState,
     learning_config,
 )
 from routing_svc.sa.fleet import can_consolidate, type_groups
@@ -211,6 +214,37 @@ def run(fleet: Fleet[NetPosition], targets: Stream) -> Recorded:
     """Every target's consolidation and the vehicles it moved."""
     outcomes = [fleet.observe(z, r) for z, r in targets]
     return [(o.consolidation, o.consolidated or None) for o in outcomes]
+
+
+def test_each_types_posts_are_chosen_on_the_targets_that_needed_it(
+    space: RoadSpace, config: FleetConfig
+) -> None:
+    # A's targets (some with a B) around one hotspot, twice as many B's around another
+    rng = np.random.default_rng(4)
+    near_a = hotspot_mixture(NET, centres=1, rng=np.random.default_rng(204))
+    near_b = hotspot_mixture(NET, centres=1, rng=np.random.default_rng(304))
+    targets: Stream = [(z, ["A"]) for z in near_a.sample(rng, 60)]
+    targets += [(z, ["B"]) for z in near_b.sample(rng, 120)]
+    targets += [(z, ["A", "B"]) for z in near_a.sample(rng, 20)]
+    fleet = typed_fleet(space, config)
+    run(fleet, targets)
+    fleet.set_states([("A0", VehicleState(Status.BUSY)), ("B0", VehicleState(Status.BUSY))])
+    posts = fleet.posts()
+
+    def best(kind: str, free: int, sample: list[NetPosition]) -> set[NetPosition]:
+        """By enumeration: the ``free`` references of ``kind`` that serve ``sample`` best."""
+        mine = of_type(fleet.positions, kind)
+        subsets = itertools.combinations(mine, free)
+        return set(
+            min(subsets, key=lambda s: float(space.cost_matrix(list(s), sample).min(axis=0).sum()))
+        )
+
+    needed = {kind: [z for z, r in targets if r is not None and kind in r] for kind in TYPES}
+    for kind, free in (("A", 2), ("B", 1)):
+        chosen = {p.position for p in posts if fleet.vehicles[p.vehicle].type == kind}
+        assert chosen == best(kind, free, needed[kind])
+    # on every target, A's posts would be others: B's demand would pull them away
+    assert best("A", 2, needed["A"]) != best("A", 2, [z for z, _ in targets])
 
 
 def test_snapshot_and_restore_go_on_as_if_never_stopped(
