@@ -24,6 +24,10 @@ learned exactly as it did: all of them with one type a target; with ``thirds`` o
 makes one consolidation a target, the separate ones may make two). Medians over seeds;
 the worst network counts; the goals are those of the learning issue.
 
+``--rest`` adds one cold curve (the first network, size and seed) through the REST API
+of a live ``routing-svc serve``: the fleet created without a rule, each target posted
+with what it needs through ``targets:batch``; the record's in-process curve beside it.
+
 Run: ``python bench/heterogeneous.py`` (seven networks, 8 and 20 vehicles, seeds 0-2) or,
 e.g., ``python bench/heterogeneous.py --nets drt --vehicles 8 --seeds 0 --mix thirds``.
 """
@@ -36,10 +40,20 @@ import statistics
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from learning import NETWORKS, Instance, instance, network_file, network_name
+from learning import (
+    NETWORKS,
+    Instance,
+    instance,
+    live_service,
+    network_file,
+    network_name,
+    rest_positions,
+    wire,
+)
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput, UnknownNetwork
@@ -88,20 +102,34 @@ def optimum_of(
     return [inst.sites[i] for i in found.sites], found.objective
 
 
-def job(args: Job) -> dict[str, Any]:
-    net, n, seed, targets, mix_name = args
+@dataclass(frozen=True)
+class Setting:
+    """One network, fleet size, seed and mix: the fleet's types, the optimum, the targets
+    and what each needs."""
+
+    inst: Instance
+    mix: tuple[RequirementClass, ...]
+    types: list[str]
+    speeds: FloatArray
+    at_optimum: list[NetPosition]
+    optimum: float
+    stream: list[NetPosition]
+    needs: list[list[str]]
+
+    def gap(self, positions: list[NetPosition]) -> float:
+        """The exact objective (11) of ``positions`` against the optimum's, less 1."""
+        value = heterogeneous_cost(
+            self.inst.space, positions, self.types, self.speeds, self.inst.demand, self.mix
+        )
+        return float(value / self.optimum - 1.0)
+
+
+def setting(net: str, n: int, seed: int, targets: int, mix_name: str) -> Setting:
     mix = MIXES[mix_name]
-    t0 = time.perf_counter()
     inst = instance(net, n, seed, shift=False)
-    space = inst.space
     types = [TYPES[0]] * (n // 2) + [TYPES[1]] * (n - n // 2)
     speeds = np.ones(n)
     at_optimum, optimum = optimum_of(inst, types, speeds, mix)
-
-    def gap(positions: list[NetPosition]) -> float:
-        value = heterogeneous_cost(space, positions, types, speeds, inst.demand, mix)
-        return float(value / optimum - 1.0)
-
     rng = np.random.default_rng([seed, 1])
     stream = inst.demand.sample(rng, targets)
     bounds = np.cumsum([c.share for c in mix])
@@ -109,6 +137,15 @@ def job(args: Job) -> dict[str, Any]:
         list(mix[min(int(np.searchsorted(bounds, u, side="right")), len(mix) - 1)].requires)
         for u in rng.random(targets)
     ]
+    return Setting(inst, mix, types, speeds, at_optimum, optimum, stream, needs)
+
+
+def job(args: Job) -> dict[str, Any]:
+    net, n, seed, targets, mix_name = args
+    t0 = time.perf_counter()
+    case = setting(net, n, seed, targets, mix_name)
+    inst, space, types, gap = case.inst, case.inst.space, case.types, case.gap
+    at_optimum, optimum, stream, needs = case.at_optimum, case.optimum, case.stream, case.needs
     marks = [k for k in CHECKPOINTS if k <= targets]
     record: dict[str, Any] = {
         "network": network_name(net),
@@ -216,6 +253,45 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
     return {"median_over_seeds": table, "worst_network": worst, "goals": goals}
 
 
+def rest_curve(net: str, n: int, seed: int, targets: int, mix_name: str) -> dict[str, Any]:
+    """The cold curve of the default rule through a live ``routing-svc serve``: a fleet of
+    the two types created without a rule, the targets posted with what they need."""
+    case = setting(net, n, seed, targets, mix_name)
+    network = case.inst.space.network
+    with live_service(net) as client:
+        vehicles = [
+            {"id": f"v{i:03d}", "type": case.types[i], "position": wire(network, p)}
+            for i, p in enumerate(case.inst.random_start)
+        ]
+        body = {"id": "bench", "network": network_name(net), "vehicles": vehicles}
+        client.post("/v1/fleets", json=body).raise_for_status()
+        gaps: dict[str, float] = {}
+        done = 0
+        t0 = time.perf_counter()
+        for mark in [k for k in CHECKPOINTS if k <= targets]:
+            for lo in range(done, mark, 500):
+                end = min(mark, lo + 500)
+                batch = [
+                    {"position": wire(network, z), "requires": need}
+                    for z, need in zip(case.stream[lo:end], case.needs[lo:end], strict=True)
+                ]
+                client.post(
+                    "/v1/fleets/bench/targets:batch", json={"targets": batch}
+                ).raise_for_status()
+            done = mark
+            gaps[str(mark)] = case.gap(rest_positions(client, "bench", network))
+        seconds = time.perf_counter() - t0
+        rule = client.get("/v1/fleets/bench").json()["rule"]
+    return {
+        "network": network_name(net),
+        "vehicles": n,
+        "seed": seed,
+        "rule": rule,
+        "gaps": gaps,
+        "targets_per_second": targets / seconds,
+    }
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--nets", default=",".join(NETWORKS))
@@ -224,6 +300,7 @@ def main() -> int:
     p.add_argument("--targets", type=int, default=max(CHECKPOINTS))
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--mix", choices=sorted(MIXES), default="one-of-two")
+    p.add_argument("--rest", action="store_true", help="add one cold curve through the REST API")
     args = p.parse_args()
     try:
         for net in args.nets.split(","):
@@ -254,6 +331,15 @@ def main() -> int:
         "records": records,
         "seconds": time.perf_counter() - started,
     }
+    if args.rest:
+        net, n, seed = args.nets.split(",")[0], args.vehicles[0], args.seeds[0]
+        curve = rest_curve(net, n, seed, args.targets, args.mix)
+        first = next(
+            r
+            for r in records
+            if r["network"] == network_name(net) and r["vehicles"] == n and r["seed"] == seed
+        )
+        report["rest"] = {**curve, "in_process": first["consolidating"]["cold"]}
     print(json.dumps(report, indent=2))
     return 0
 

@@ -31,6 +31,7 @@ free-flow travel time instead of metres.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -41,11 +42,13 @@ import sys
 import tempfile
 import time
 from collections import Counter
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import httpx
 import numpy as np
 
 from routing_svc.demand import DemandDistribution
@@ -440,15 +443,10 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def rest_curve(
-    net: str, n: int, seed: int, targets: int, spec: str, spread: float | None, cost: CostKind
-) -> dict[str, Any]:
-    """The cold curve of the default rule through a live ``routing-svc serve``."""
-    import httpx
-
-    inst = instance(net, n, seed, spec, spread, cost)
-    space = inst.space
-    network = space.network
+@contextlib.contextmanager
+def live_service(net: str) -> Iterator[httpx.Client]:
+    """A client of a live ``routing-svc serve`` of network ``net`` (in a folder of its own,
+    its banner on standard error), stopped on leaving."""
     port = free_port()
     folder = Path(tempfile.mkdtemp(prefix="learning-rest-"))
     server = subprocess.Popen(
@@ -472,9 +470,8 @@ def rest_curve(
         env=os.environ.copy(),
         stdout=sys.stderr,  # the server's banner must not mix with this script's JSON
     )
-    base = f"http://127.0.0.1:{port}"
     try:
-        with httpx.Client(base_url=base, timeout=120.0) as client:
+        with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=120.0) as client:
             for _ in range(600):
                 try:
                     if client.get("/healthz").status_code == 200:
@@ -482,50 +479,56 @@ def rest_curve(
                 except httpx.TransportError:
                     pass
                 time.sleep(0.1)
-            vehicles = [
-                {
-                    "id": f"v{i:03d}",
-                    "position": {"edge": network.edge_ids[p.edge], "offset": p.offset},
-                }
-                for i, p in enumerate(inst.random_start)
-            ]
-            created = client.post(
-                "/v1/fleets",
-                json={
-                    "id": "bench",
-                    "network": network_name(net),
-                    "cost": cost,
-                    "vehicles": vehicles,
-                },
-            )
-            created.raise_for_status()
-            stream = inst.demand.sample(np.random.default_rng([seed, 1]), targets)
-            gaps: dict[str, float] = {}
-            done = 0
-            t0 = time.perf_counter()
-            for mark in [k for k in CHECKPOINTS if k <= targets]:
-                for lo in range(done, mark, 500):
-                    batch = [
-                        {"position": {"edge": network.edge_ids[z.edge], "offset": z.offset}}
-                        for z in stream[lo : min(mark, lo + 500)]
-                    ]
-                    client.post(
-                        "/v1/fleets/bench/targets:batch", json={"targets": batch}
-                    ).raise_for_status()
-                done = mark
-                fleet = client.get("/v1/fleets/bench").json()
-                positions = [
-                    NetPosition(
-                        network.edge_index[v["position"]["edge"]], float(v["position"]["offset"])
-                    )
-                    for v in fleet["vehicles"]
-                ]
-                gaps[str(mark)] = gap(space, positions, inst.demand, inst.optimum[0])
-            seconds = time.perf_counter() - t0
-            rule = fleet["rule"]
+            yield client
     finally:
         server.terminate()
         server.wait(timeout=30)
+
+
+def wire(network: Any, z: NetPosition) -> dict[str, Any]:
+    """A position as the API takes it."""
+    return {"edge": network.edge_ids[z.edge], "offset": z.offset}
+
+
+def rest_positions(client: httpx.Client, fleet_id: str, network: Any) -> list[NetPosition]:
+    """A fleet's references as ``GET /v1/fleets/{id}`` gives them, in its vehicle order."""
+    fleet = client.get(f"/v1/fleets/{fleet_id}").json()
+    return [
+        NetPosition(network.edge_index[v["position"]["edge"]], float(v["position"]["offset"]))
+        for v in fleet["vehicles"]
+    ]
+
+
+def rest_curve(
+    net: str, n: int, seed: int, targets: int, spec: str, spread: float | None, cost: CostKind
+) -> dict[str, Any]:
+    """The cold curve of the default rule through a live ``routing-svc serve``."""
+    inst = instance(net, n, seed, spec, spread, cost)
+    space = inst.space
+    network = space.network
+    with live_service(net) as client:
+        vehicles = [
+            {"id": f"v{i:03d}", "position": wire(network, p)}
+            for i, p in enumerate(inst.random_start)
+        ]
+        body = {"id": "bench", "network": network_name(net), "cost": cost, "vehicles": vehicles}
+        created = client.post("/v1/fleets", json=body)
+        created.raise_for_status()
+        stream = inst.demand.sample(np.random.default_rng([seed, 1]), targets)
+        gaps: dict[str, float] = {}
+        done = 0
+        t0 = time.perf_counter()
+        for mark in [k for k in CHECKPOINTS if k <= targets]:
+            for lo in range(done, mark, 500):
+                batch = [{"position": wire(network, z)} for z in stream[lo : min(mark, lo + 500)]]
+                client.post(
+                    "/v1/fleets/bench/targets:batch", json={"targets": batch}
+                ).raise_for_status()
+            done = mark
+            positions = rest_positions(client, "bench", network)
+            gaps[str(mark)] = gap(space, positions, inst.demand, inst.optimum[0])
+        seconds = time.perf_counter() - t0
+        rule = client.get("/v1/fleets/bench").json()["rule"]
     return {
         "network": network_name(net),
         "vehicles": n,

@@ -1,6 +1,6 @@
 """``bench/heterogeneous.py`` prints one JSON document whose summary is that of its
-records, prices the per-type optima at the optimum by objective (11), and refuses bad
-options before any work."""
+records, prices the per-type optima at the optimum by objective (11), gives the same curve
+through the REST API, and refuses bad options before any work."""
 
 from __future__ import annotations
 
@@ -74,7 +74,7 @@ def test_heterogeneous_refuses_bad_options_before_any_work(tmp_path: Path) -> No
 def test_a_third_of_the_targets_need_both_types(tmp_path: Path) -> None:
     done = run(
         tmp_path, "--nets", "drt", "--vehicles", "4", "--seeds", "0", "--targets", "300",
-        "--jobs", "1", "--mix", "thirds",
+        "--jobs", "1", "--mix", "thirds", "--rest",
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
@@ -84,3 +84,11 @@ def test_a_third_of_the_targets_need_both_types(tmp_path: Path) -> None:
     # the solver's value of its optimum is the evaluator's: objective (11) both ways
     assert abs(record["gap_at_optimum"]) < 1e-9
     assert set(record["consolidating"]) == {"cold", "warm"}
+    # the same targets through a live service: a fleet of both types, created without a
+    # rule, learns as in process (no consolidation falls due before 300 targets here)
+    rest = report["rest"]
+    assert (rest["network"], rest["vehicles"], rest["seed"]) == ("drt", 4, 0)
+    assert rest["rule"] == "consolidating"
+    assert rest["in_process"] == record["consolidating"]["cold"]
+    assert rest["gaps"] == rest["in_process"]
+    assert "API docs at" in done.stderr  # the server's banner, kept off standard output
