@@ -18,6 +18,7 @@ from routing_svc.errors import InvalidInput
 from routing_svc.network.stands import Stand, stands_on_network
 from routing_svc.optimum.stands import solve_stands
 from routing_svc.sa import Annealing, Objective, learning_config, prior_counts
+from routing_svc.sa.fleet import type_groups
 from routing_svc.sa.schedules import Counting, schedule_from_dict
 from routing_svc.sa.stands import StandSet
 from routing_svc.service.networks import NetworkEntry
@@ -28,8 +29,24 @@ from routing_svc.service.reference import (
     reference_optimum,
     solve_reference,
 )
-from routing_svc.service.schemas import FleetSpec, StandSpec
+from routing_svc.service.schemas import FleetSpec, StandSpec, VehicleSpec
 from routing_svc.types import NetPosition
+
+
+def start_groups(ordered: list[VehicleSpec], *, per_type: bool) -> list[list[VehicleSpec]]:
+    """The vehicles (in id order) that start together at the optimum of a sample.
+
+    Each type apart when there are several, each of one speed, and ``per_type`` (no
+    stands, whose capacities the types would share): a sample names no requirements,
+    and for targets that each need one vehicle of a type, spread as the sample is, the
+    optimum of objective (11) is each type's p-median of it (where such a fleet's
+    consolidations lead, :attr:`routing_svc.sa.Fleet.learns_per_type`). Else the whole
+    fleet, whose p-median serves targets that need any one vehicle.
+    """
+    groups = type_groups([v.type for v in ordered], [v.speed for v in ordered])
+    if not per_type or groups is None or len(groups) == 1:
+        return [ordered]
+    return [[ordered[i] for i in members] for members in groups.values()]
 
 
 def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any]:
@@ -55,19 +72,25 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
     if spec.start is not None:
         sample = [entry.resolve(p) for p in spec.start.optimum.sample]
         prior = DemandDistribution.of_targets("prior-sample", sample)
-        if stands is None:
-            positions, _ = solve_reference(
-                entry, cost=spec.cost, demand=prior, vehicles=n, power=objective.power
-            )
-        else:
-            positions = solve_stands(space, prior, n, stands, power=objective.power).positions
-        # deterministic pairing: vehicles in id order take the sites in edge order
-        positions.sort()
         ordered = sorted(spec.vehicles, key=lambda v: v.id)
-        starts = {v.id: p for v, p in zip(ordered, positions, strict=True)}
-        counts = prior_counts(
-            space, [starts[v.id] for v in ordered], [v.speed for v in ordered], sample
-        )
+        starts, served = {}, {}
+        for group in start_groups(ordered, per_type=stands is None):
+            if stands is None:
+                positions, _ = solve_reference(
+                    entry, cost=spec.cost, demand=prior, vehicles=len(group), power=objective.power
+                )
+            else:
+                positions = solve_stands(
+                    space, prior, len(group), stands, power=objective.power
+                ).positions
+            # deterministic pairing: vehicles in id order take the sites in edge order
+            positions.sort()
+            starts.update({v.id: p for v, p in zip(group, positions, strict=True)})
+            counts = prior_counts(
+                space, [starts[v.id] for v in group], [v.speed for v in group], sample
+            )
+            served.update({v.id: k for v, k in zip(group, counts, strict=True)})
+        counts = tuple(served[v.id] for v in ordered)
     else:
         starts = {v.id: entry.resolve(v.position) for v in spec.vehicles if v.position}
         counts = ()

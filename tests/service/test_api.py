@@ -221,6 +221,35 @@ def test_start_at_the_optimum_of_a_prior_sample(client: TestClient) -> None:
     assert edges == sorted([edge(10), edge(400)])
 
 
+def test_each_type_starts_at_the_optimum_of_the_whole_sample(client: TestClient) -> None:
+    sample: list[dict[str, Any]] = [{"edge": edge(10), "offset": 0.0}] * 6
+    sample += [{"edge": edge(400), "offset": 0.0}] * 4
+    vehicles = [{"id": "a1", "type": "A"}, {"id": "a2", "type": "A"}, {"id": "b1", "type": "B"}]
+    vehicles += [{"id": "b2", "type": "B"}, {"id": "b3", "type": "B"}]
+    body = fleet_body(vehicles=vehicles, start={"optimum": {"sample": sample}})
+    r = client.post("/v1/fleets", json=body)
+    assert r.status_code == 201, r.text
+    fleet = r.json()
+    assert fleet["rule"] == "consolidating"
+    at = {v["id"]: v["position"] for v in fleet["vehicles"]}
+    # the sample names no types: each type covers both demand points (cost 0 for its
+    # targets); a p-median of all five vehicles may leave one type on one point only
+    assert {at["a1"]["edge"], at["a2"]["edge"]} == {edge(10), edge(400)}
+    assert {at[b]["edge"] for b in ("b1", "b2", "b3")} >= {edge(10), edge(400)}
+    # each type counts the whole sample in its step sizes: per type, every target goes
+    # to the closest vehicle of that type (ties: lower id)
+    steps = client.get("/v1/fleets/f1/metrics").json()["step_size"]
+    a, power = fleet["step"]["a"], fleet["step"]["power"]
+    points = [NetPosition(NET.edge_index[t["edge"]], 0.0) for t in sample]
+    for kind in ("A", "B"):
+        ids = sorted(v for v in at if v[0] == kind.lower())
+        starts = [NetPosition(NET.edge_index[at[v]["edge"]], at[v]["offset"]) for v in ids]
+        counts = np.bincount(SPACE.cost_matrix(starts, points).argmin(axis=0), minlength=len(ids))
+        assert counts.sum() == len(sample)
+        for v, k in zip(ids, counts, strict=True):
+            assert steps[v] == pytest.approx(a / (k + 1) ** power)
+
+
 def test_a_network_uploaded_through_one_instance_serves_another(
     db_url: str, make_client: Any
 ) -> None:
