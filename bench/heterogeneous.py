@@ -24,7 +24,8 @@ learned exactly as it did: all of them with one type a target; with ``thirds`` o
 makes one consolidation a target, the separate ones may make two). Medians over seeds;
 the worst network counts; the goals are those of the learning issue.
 
-``--rest`` adds one cold curve (the first network, size and seed) through the REST API
+``--demand`` takes any of ``simulate``'s demand specs instead of the three hotspots
+(``uniform``, ``hotspots:8``, ...). ``--rest`` adds one cold curve (the first network, size and seed) through the REST API
 of a live ``routing-svc serve``: the fleet created without a rule, each target posted
 with what it needs through ``targets:batch``; the record's in-process curve beside it.
 
@@ -45,6 +46,7 @@ from typing import Any
 
 import numpy as np
 from learning import (
+    DEFAULT_DEMAND,
     NETWORKS,
     Instance,
     instance,
@@ -56,6 +58,7 @@ from learning import (
 )
 
 from routing_svc.demand import DemandDistribution
+from routing_svc.demand.spec import parse_demand_spec
 from routing_svc.errors import InvalidInput, UnknownNetwork
 from routing_svc.optimum import solve_demand
 from routing_svc.optimum.heterogeneous import (
@@ -83,7 +86,7 @@ SCENARIOS = ("cold", "warm")
 CHECKPOINTS = (300, 1000, 3000, 10000)
 GOALS = {"cold_3000": 0.05, "warm_every": 0.05, "warm_from_3000": 0.015}
 
-Job = tuple[str, int, int, int, str]
+Job = tuple[str, int, int, int, str, str]
 
 
 def optimum_of(
@@ -124,9 +127,9 @@ class Setting:
         return float(value / self.optimum - 1.0)
 
 
-def setting(net: str, n: int, seed: int, targets: int, mix_name: str) -> Setting:
+def setting(net: str, n: int, seed: int, targets: int, mix_name: str, demand: str) -> Setting:
     mix = MIXES[mix_name]
-    inst = instance(net, n, seed, shift=False)
+    inst = instance(net, n, seed, demand, shift=False)
     types = [TYPES[0]] * (n // 2) + [TYPES[1]] * (n - n // 2)
     speeds = np.ones(n)
     at_optimum, optimum = optimum_of(inst, types, speeds, mix)
@@ -141,9 +144,9 @@ def setting(net: str, n: int, seed: int, targets: int, mix_name: str) -> Setting
 
 
 def job(args: Job) -> dict[str, Any]:
-    net, n, seed, targets, mix_name = args
+    net, n, seed, targets, mix_name, demand = args
     t0 = time.perf_counter()
-    case = setting(net, n, seed, targets, mix_name)
+    case = setting(net, n, seed, targets, mix_name, demand)
     inst, space, types, gap = case.inst, case.inst.space, case.types, case.gap
     at_optimum, optimum, stream, needs = case.at_optimum, case.optimum, case.stream, case.needs
     marks = [k for k in CHECKPOINTS if k <= targets]
@@ -253,10 +256,12 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
     return {"median_over_seeds": table, "worst_network": worst, "goals": goals}
 
 
-def rest_curve(net: str, n: int, seed: int, targets: int, mix_name: str) -> dict[str, Any]:
+def rest_curve(
+    net: str, n: int, seed: int, targets: int, mix_name: str, demand: str
+) -> dict[str, Any]:
     """The cold curve of the default rule through a live ``routing-svc serve``: a fleet of
     the two types created without a rule, the targets posted with what they need."""
-    case = setting(net, n, seed, targets, mix_name)
+    case = setting(net, n, seed, targets, mix_name, demand)
     network = case.inst.space.network
     with live_service(net) as client:
         vehicles = [
@@ -300,11 +305,17 @@ def main() -> int:
     p.add_argument("--targets", type=int, default=max(CHECKPOINTS))
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--mix", choices=sorted(MIXES), default="one-of-two")
+    p.add_argument(
+        "--demand",
+        default=DEFAULT_DEMAND,
+        help="where targets are, as simulate's --demand (default hotspots:3)",
+    )
     p.add_argument("--rest", action="store_true", help="add one cold curve through the REST API")
     args = p.parse_args()
     try:
         for net in args.nets.split(","):
             network_file(net)
+        parse_demand_spec(args.demand)
     except (InvalidInput, UnknownNetwork) as e:
         p.error(str(e))
     if args.targets < min(CHECKPOINTS) or args.jobs < 1:
@@ -313,7 +324,7 @@ def main() -> int:
         p.error("--vehicles: at least 2 (one of each type)")
     started = time.perf_counter()
     jobs: list[Job] = [
-        (net, n, seed, args.targets, args.mix)
+        (net, n, seed, args.targets, args.mix, args.demand)
         for net in args.nets.split(",")
         for n in args.vehicles
         for seed in args.seeds
@@ -324,6 +335,7 @@ def main() -> int:
         "benchmark": "heterogeneous",
         "types": list(TYPES),
         "mix": [{"requires": list(c.requires), "share": c.share} for c in MIXES[args.mix]],
+        "demand": args.demand,
         "baseline": "batch: per type, the p-median of the targets seen so far that needed it",
         "gap": "exact expected cost of objective (11) / optimum - 1",
         **summarise(records),
@@ -333,7 +345,7 @@ def main() -> int:
     }
     if args.rest:
         net, n, seed = args.nets.split(",")[0], args.vehicles[0], args.seeds[0]
-        curve = rest_curve(net, n, seed, args.targets, args.mix)
+        curve = rest_curve(net, n, seed, args.targets, args.mix, args.demand)
         first = next(
             r
             for r in records

@@ -64,6 +64,7 @@ def test_heterogeneous_refuses_bad_options_before_any_work(tmp_path: Path) -> No
         (["--targets", "10"], "--targets must be at least 300 and --jobs at least 1"),
         (["--vehicles", "1"], "--vehicles: at least 2 (one of each type)"),
         (["--mix", "halves"], "invalid choice: 'halves'"),
+        (["--demand", "nosuch"], "--demand must be 'uniform'"),
     ):
         done = run(tmp_path, *options)
         assert done.returncode == 2, (options, done.stderr)
