@@ -25,9 +25,10 @@ makes one consolidation a target, the separate ones may make two). Medians over 
 the worst network counts; the goals are those of the learning issue.
 
 ``--demand`` takes any of ``simulate``'s demand specs instead of the three hotspots
-(``uniform``, ``hotspots:8``, ...). ``--rest`` adds one cold curve (the first network, size and seed) through the REST API
-of a live ``routing-svc serve``: the fleet created without a rule, each target posted
-with what it needs through ``targets:batch``; the record's in-process curve beside it.
+(``uniform``, ``hotspots:8``, ...). ``--rest`` adds one cold curve (the first network,
+size and seed) through the REST API of a live ``routing-svc serve``: the fleet created
+without a rule, each target posted with what it needs through ``targets:batch``; the
+record's in-process curve beside it.
 
 Run: ``python bench/heterogeneous.py`` (seven networks, 8 and 20 vehicles, seeds 0-2) or,
 e.g., ``python bench/heterogeneous.py --nets drt --vehicles 8 --seeds 0 --mix thirds``.
