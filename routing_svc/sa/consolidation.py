@@ -520,7 +520,7 @@ def consolidate(
         needed). A target then costs ``max(c, f)`` from references ``c`` away: the
         term of objective (11) with the other types fixed. Every fit is the p-median
         of the plain costs improved by the fast interchange on these
-        (:func:`fitted`); the test and the costs recorded use these. Not with
+        (:func:`priced_fit`); the test and the costs recorded use these. Not with
         ``stands``.
     """
     p = len(positions)
@@ -571,7 +571,7 @@ def consolidate(
         """Solve the whole reservoir and take its best."""
 
         def solved(_: int) -> IntArray:
-            return fitted(plain, costs, weight, [current, anchored], shakes)
+            return priced_fit(plain, costs, weight, [current, anchored], shakes)
 
         if stands is None:
             ordered = _pair(current, solved(p))
@@ -789,7 +789,7 @@ def best_fit(costs: FloatArray, weight: FloatArray, starts: list[IntArray]) -> I
     return candidates[int(np.argmin(values))]
 
 
-def fitted(
+def priced_fit(
     plain: FloatArray, priced: FloatArray, weight: FloatArray, starts: list[IntArray], shakes: int
 ) -> IntArray:
     """The p-median fit of ``weight`` on the ``plain`` costs (:func:`best_fit`, then
@@ -809,11 +809,11 @@ def _fold_fits(
     parts: list[FloatArray],
     starts: list[IntArray],
 ) -> list[IntArray]:
-    """:func:`fitted` of ``weight`` without each part, the parts solved side by side on
+    """:func:`priced_fit` of ``weight`` without each part, the parts solved side by side on
     threads (the kernels release the GIL; each solve is the same as alone)."""
 
     def fit(part: FloatArray) -> IntArray:
-        return fitted(plain, priced, weight - part, starts, 0)
+        return priced_fit(plain, priced, weight - part, starts, 0)
 
     workers = min(len(parts), os.cpu_count() or 1)
     if workers < 2:
