@@ -51,10 +51,9 @@ from learning import (
     NETWORKS,
     Instance,
     instance,
-    live_service,
     network_file,
     network_name,
-    rest_positions,
+    rest_run,
     wire,
 )
 
@@ -264,38 +263,17 @@ def rest_curve(
     the two types created without a rule, the targets posted with what they need."""
     case = setting(net, n, seed, targets, mix_name, demand)
     network = case.inst.space.network
-    with live_service(net) as client:
-        vehicles = [
-            {"id": f"v{i:03d}", "type": case.types[i], "position": wire(network, p)}
-            for i, p in enumerate(case.inst.random_start)
-        ]
-        body = {"id": "bench", "network": network_name(net), "vehicles": vehicles}
-        client.post("/v1/fleets", json=body).raise_for_status()
-        gaps: dict[str, float] = {}
-        done = 0
-        t0 = time.perf_counter()
-        for mark in [k for k in CHECKPOINTS if k <= targets]:
-            for lo in range(done, mark, 500):
-                end = min(mark, lo + 500)
-                batch = [
-                    {"position": wire(network, z), "requires": need}
-                    for z, need in zip(case.stream[lo:end], case.needs[lo:end], strict=True)
-                ]
-                client.post(
-                    "/v1/fleets/bench/targets:batch", json={"targets": batch}
-                ).raise_for_status()
-            done = mark
-            gaps[str(mark)] = case.gap(rest_positions(client, "bench", network))
-        seconds = time.perf_counter() - t0
-        rule = client.get("/v1/fleets/bench").json()["rule"]
-    return {
-        "network": network_name(net),
-        "vehicles": n,
-        "seed": seed,
-        "rule": rule,
-        "gaps": gaps,
-        "targets_per_second": targets / seconds,
-    }
+    vehicles = [
+        {"id": f"v{i:03d}", "type": case.types[i], "position": wire(network, p)}
+        for i, p in enumerate(case.inst.random_start)
+    ]
+    fleet = {"id": "bench", "network": network_name(net), "vehicles": vehicles}
+    bodies = [
+        {"position": wire(network, z), "requires": need}
+        for z, need in zip(case.stream, case.needs, strict=True)
+    ]
+    run = rest_run(net, network, fleet, bodies, CHECKPOINTS, case.gap)
+    return {"network": network_name(net), "vehicles": n, "seed": seed, **run}
 
 
 def main() -> int:

@@ -42,7 +42,7 @@ import sys
 import tempfile
 import time
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,7 +54,7 @@ import numpy as np
 from routing_svc.demand import DemandDistribution
 from routing_svc.demand.spec import DemandRecipe, Hotspots, network_demand, parse_demand_spec
 from routing_svc.errors import InvalidInput, UnknownNetwork
-from routing_svc.network import RoadSpace, load_network
+from routing_svc.network import CompiledNetwork, RoadSpace, load_network
 from routing_svc.network.catalogue import named_network, resolve_network
 from routing_svc.network.costs import CostKind
 from routing_svc.optimum import MAX_SITES, expected_cost, solve_demand, solve_pmedian
@@ -485,18 +485,49 @@ def live_service(net: str) -> Iterator[httpx.Client]:
         server.wait(timeout=30)
 
 
-def wire(network: Any, z: NetPosition) -> dict[str, Any]:
+def wire(network: CompiledNetwork, z: NetPosition) -> dict[str, Any]:
     """A position as the API takes it."""
     return {"edge": network.edge_ids[z.edge], "offset": z.offset}
 
 
-def rest_positions(client: httpx.Client, fleet_id: str, network: Any) -> list[NetPosition]:
+def rest_positions(
+    client: httpx.Client, fleet_id: str, network: CompiledNetwork
+) -> list[NetPosition]:
     """A fleet's references as ``GET /v1/fleets/{id}`` gives them, in its vehicle order."""
     fleet = client.get(f"/v1/fleets/{fleet_id}").json()
     return [
         NetPosition(network.edge_index[v["position"]["edge"]], float(v["position"]["offset"]))
         for v in fleet["vehicles"]
     ]
+
+
+def rest_run(
+    net: str,
+    network: CompiledNetwork,
+    fleet: dict[str, Any],
+    targets: list[dict[str, Any]],
+    checkpoints: Sequence[int],
+    gap_of: Callable[[list[NetPosition]], float],
+) -> dict[str, Any]:
+    """Create ``fleet`` (a ``POST /v1/fleets`` body) on a live service of ``net`` (compiled
+    as ``network``), post
+    ``targets`` (target bodies) through ``targets:batch``, 500 a request, and at each
+    checkpoint price its references by ``gap_of``: its rule, the gaps and targets/s."""
+    with live_service(net) as client:
+        client.post("/v1/fleets", json=fleet).raise_for_status()
+        route = f"/v1/fleets/{fleet['id']}"
+        gaps: dict[str, float] = {}
+        done = 0
+        t0 = time.perf_counter()
+        for mark in [k for k in checkpoints if k <= len(targets)]:
+            for lo in range(done, mark, 500):
+                batch = targets[lo : min(mark, lo + 500)]
+                client.post(f"{route}/targets:batch", json={"targets": batch}).raise_for_status()
+            done = mark
+            gaps[str(mark)] = gap_of(rest_positions(client, fleet["id"], network))
+        seconds = time.perf_counter() - t0
+        rule = client.get(route).json()["rule"]
+    return {"rule": rule, "gaps": gaps, "targets_per_second": len(targets) / seconds}
 
 
 def rest_curve(
@@ -506,37 +537,18 @@ def rest_curve(
     inst = instance(net, n, seed, spec, spread, cost)
     space = inst.space
     network = space.network
-    with live_service(net) as client:
-        vehicles = [
-            {"id": f"v{i:03d}", "position": wire(network, p)}
-            for i, p in enumerate(inst.random_start)
-        ]
-        body = {"id": "bench", "network": network_name(net), "cost": cost, "vehicles": vehicles}
-        created = client.post("/v1/fleets", json=body)
-        created.raise_for_status()
-        stream = inst.demand.sample(np.random.default_rng([seed, 1]), targets)
-        gaps: dict[str, float] = {}
-        done = 0
-        t0 = time.perf_counter()
-        for mark in [k for k in CHECKPOINTS if k <= targets]:
-            for lo in range(done, mark, 500):
-                batch = [{"position": wire(network, z)} for z in stream[lo : min(mark, lo + 500)]]
-                client.post(
-                    "/v1/fleets/bench/targets:batch", json={"targets": batch}
-                ).raise_for_status()
-            done = mark
-            positions = rest_positions(client, "bench", network)
-            gaps[str(mark)] = gap(space, positions, inst.demand, inst.optimum[0])
-        seconds = time.perf_counter() - t0
-        rule = client.get("/v1/fleets/bench").json()["rule"]
-    return {
-        "network": network_name(net),
-        "vehicles": n,
-        "seed": seed,
-        "rule": rule,
-        "gaps": gaps,
-        "targets_per_second": targets / seconds,
-    }
+    vehicles = [
+        {"id": f"v{i:03d}", "position": wire(network, p)} for i, p in enumerate(inst.random_start)
+    ]
+    fleet = {"id": "bench", "network": network_name(net), "cost": cost, "vehicles": vehicles}
+    stream = inst.demand.sample(np.random.default_rng([seed, 1]), targets)
+    bodies = [{"position": wire(network, z)} for z in stream]
+
+    def gap_of(positions: list[NetPosition]) -> float:
+        return gap(space, positions, inst.demand, inst.optimum[0])
+
+    run = rest_run(net, network, fleet, bodies, CHECKPOINTS, gap_of)
+    return {"network": network_name(net), "vehicles": n, "seed": seed, **run}
 
 
 def main() -> int:
