@@ -86,10 +86,10 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
             # deterministic pairing: vehicles in id order take the sites in edge order
             positions.sort()
             starts.update({v.id: p for v, p in zip(group, positions, strict=True)})
-            counts = prior_counts(
+            group_counts = prior_counts(
                 space, [starts[v.id] for v in group], [v.speed for v in group], sample
             )
-            served.update({v.id: k for v, k in zip(group, counts, strict=True)})
+            served.update({v.id: k for v, k in zip(group, group_counts, strict=True)})
         counts = tuple(served[v.id] for v in ordered)
     else:
         starts = {v.id: entry.resolve(v.position) for v in spec.vehicles if v.position}
