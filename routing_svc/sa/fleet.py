@@ -765,9 +765,14 @@ class Fleet(Generic[P]):
         for learning, cost, partners in fed:  # one consolidation at most: the first due
             if self._type_groups is not None:
                 learning.seen += 1
-            ids = self._group_ids(learning)
             free = consolidation is None
-            mine = recorded if free and (recorded_for is None or recorded_for == ids) else None
+            mine = (
+                recorded
+                if free
+                and recorded is not None
+                and (recorded_for is None or recorded_for == self._group_ids(learning))
+                else None
+            )
             done = self._learn_from(
                 learning,
                 policy,
@@ -780,7 +785,7 @@ class Fleet(Generic[P]):
                 may_consolidate=free,
             )
             if done is not None:
-                consolidation, consolidated = done, ids
+                consolidation, consolidated = done, self._group_ids(learning)
         if recorded is not None and consolidation is None:
             raise ReplayMismatch("a consolidation was recorded for a target that makes none")
         return Outcome(
