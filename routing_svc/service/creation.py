@@ -10,15 +10,17 @@ needs none of it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
 
 from routing_svc.demand import DemandDistribution
-from routing_svc.errors import InvalidInput
+from routing_svc.errors import InvalidInput, RoutingSvcError
 from routing_svc.network.stands import Stand, stands_on_network
 from routing_svc.optimum.stands import solve_stands
 from routing_svc.sa import Annealing, Objective, learning_config, prior_counts
 from routing_svc.sa.fleet import type_groups
+from routing_svc.sa.requirements import build_requirement
 from routing_svc.sa.schedules import Counting, schedule_from_dict
 from routing_svc.sa.stands import StandSet
 from routing_svc.service.networks import NetworkEntry
@@ -33,20 +35,53 @@ from routing_svc.service.schemas import FleetSpec, StandSpec, VehicleSpec
 from routing_svc.types import NetPosition
 
 
-def start_groups(ordered: list[VehicleSpec], *, per_type: bool) -> list[list[VehicleSpec]]:
-    """The vehicles (in id order) that start together at the optimum of a sample.
+def start_groups(
+    ordered: list[VehicleSpec],
+    sample: list[NetPosition],
+    requires: Sequence[Sequence[str] | None] | None,
+    *,
+    per_type: bool,
+) -> list[tuple[list[VehicleSpec], list[NetPosition]]]:
+    """The vehicles (in id order) that start together at the optimum of a sample, each
+    group with the sample's targets it starts at the optimum of.
 
     Each type apart when there are several, each of one speed, and ``per_type`` (no
-    stands, whose capacities the types would share): a sample names no requirements,
-    and for targets that each need one vehicle of a type, spread as the sample is, the
-    optimum of objective (11) is each type's p-median of it (where such a fleet's
-    consolidations lead, :attr:`routing_svc.sa.Fleet.learns_per_type`). Else the whole
-    fleet, whose p-median serves targets that need any one vehicle.
+    stands, whose capacities the types would share): for targets that each need one
+    vehicle of a type, the optimum of objective (11) is each type's p-median of the
+    targets that needed it (where such a fleet's consolidations lead,
+    :attr:`routing_svc.sa.Fleet.learns_per_type`). A type's targets are those whose
+    ``requires`` name it and those that needed any one vehicle (all of them when
+    ``requires`` is ``None``); a type no target needed takes the whole sample. Else
+    the whole fleet at the p-median of the whole sample, which serves targets that
+    need any one vehicle.
     """
     groups = type_groups([v.type for v in ordered], [v.speed for v in ordered])
     if not per_type or groups is None or len(groups) == 1:
-        return [ordered]
-    return [[ordered[i] for i in members] for members in groups.values()]
+        return [(ordered, sample)]
+    out = []
+    for kind, members in groups.items():
+        own = (
+            sample
+            if requires is None
+            else [
+                z for z, needs in zip(sample, requires, strict=True) if not needs or kind in needs
+            ]
+        )
+        out.append(([ordered[i] for i in members], own or sample))
+    return out
+
+
+def check_sample_requires(
+    requires: Sequence[Sequence[str] | None] | None, types: Sequence[str]
+) -> None:
+    """Refuse a sample target that needs a type the fleet lacks, or more vehicles of a
+    type than it has (:func:`routing_svc.sa.requirements.build_requirement`)."""
+    for i, needs in enumerate(requires or ()):
+        if needs:
+            try:
+                build_requirement(types, needs)
+            except RoutingSvcError as exc:
+                raise InvalidInput(f"start.optimum.requires[{i}]: {exc.detail}") from None
 
 
 def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any]:
@@ -70,11 +105,14 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
         raise InvalidInput("with 'start', leave every vehicle's position out")
     stands = None if spec.stands is None else build_stands(spec.stands, entry, vehicles=n)
     if spec.start is not None:
-        sample = [entry.resolve(p) for p in spec.start.optimum.sample]
-        prior = DemandDistribution.of_targets("prior-sample", sample)
+        optimum_start = spec.start.optimum
+        check_sample_requires(optimum_start.requires, types)
+        sample = [entry.resolve(p) for p in optimum_start.sample]
         ordered = sorted(spec.vehicles, key=lambda v: v.id)
         starts, served = {}, {}
-        for group in start_groups(ordered, per_type=stands is None):
+        groups = start_groups(ordered, sample, optimum_start.requires, per_type=stands is None)
+        for group, own in groups:
+            prior = DemandDistribution.of_targets("prior-sample", own)
             if stands is None:
                 positions, _ = solve_reference(
                     entry, cost=spec.cost, demand=prior, vehicles=len(group), power=objective.power
@@ -87,7 +125,7 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
             positions.sort()
             starts.update({v.id: p for v, p in zip(group, positions, strict=True)})
             group_counts = prior_counts(
-                space, [starts[v.id] for v in group], [v.speed for v in group], sample
+                space, [starts[v.id] for v in group], [v.speed for v in group], own
             )
             served.update({v.id: k for v, k in zip(group, group_counts, strict=True)})
         counts = tuple(served[v.id] for v in ordered)

@@ -13,6 +13,7 @@ from pydantic import (
     Field,
     StringConstraints,
     field_validator,
+    model_validator,
 )
 
 from routing_svc.sa import DEFAULT_RULE
@@ -95,6 +96,28 @@ class VehicleSpec(Strict):
 
 class OptimumStart(Strict):
     sample: Annotated[list[Position], Field(min_length=1, max_length=5000)]
+    requires: (
+        Annotated[
+            list[Annotated[list[TypeName], Field(max_length=64)] | None],
+            Field(
+                max_length=5000,
+                description="Per sample position, the types its target needed (as a "
+                "target's 'requires'; null or [] for any one vehicle). A fleet whose types "
+                "each start apart starts each type at the optimum of the targets that "
+                "needed it and of those that needed any one vehicle.",
+            ),
+        ]
+        | None
+    ) = None
+
+    @model_validator(mode="after")
+    def _one_requirement_per_position(self) -> OptimumStart:
+        if self.requires is not None and len(self.requires) != len(self.sample):
+            raise ValueError(
+                f"requires needs one entry per sample position: {len(self.requires)} "
+                f"for {len(self.sample)}"
+            )
+        return self
 
 
 class StartSpec(Strict):

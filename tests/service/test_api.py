@@ -250,6 +250,101 @@ def test_each_type_starts_at_the_optimum_of_the_whole_sample(client: TestClient)
             assert steps[v] == pytest.approx(a / (k + 1) ** power)
 
 
+def _steps_match_counts(
+    steps: dict[str, float], fleet: dict[str, Any], ids: list[str], own: list[dict[str, Any]]
+) -> None:
+    """Each of ``ids`` (one type) has the step size of the targets of ``own`` it reaches
+    first among them (ties: lower id)."""
+    at = {v["id"]: v["position"] for v in fleet["vehicles"]}
+    a, power = fleet["step"]["a"], fleet["step"]["power"]
+    points = [NetPosition(NET.edge_index[t["edge"]], t["offset"]) for t in own]
+    starts = [NetPosition(NET.edge_index[at[v]["edge"]], at[v]["offset"]) for v in ids]
+    counts = np.bincount(SPACE.cost_matrix(starts, points).argmin(axis=0), minlength=len(ids))
+    assert counts.sum() == len(own)
+    for v, k in zip(ids, counts, strict=True):
+        assert steps[v] == pytest.approx(a / (k + 1) ** power)
+
+
+def test_each_type_starts_at_the_optimum_of_the_sample_targets_that_needed_it(
+    client: TestClient,
+) -> None:
+    a_targets: list[dict[str, Any]] = [{"edge": edge(10), "offset": 0.0}] * 6
+    a_targets += [{"edge": edge(200), "offset": 0.0}] * 2
+    b_targets: list[dict[str, Any]] = [{"edge": edge(400), "offset": 0.0}] * 4
+    sample = a_targets + b_targets
+    requires: list[Any] = [["A"]] * len(a_targets) + [["B"]] * len(b_targets)
+    vehicles = [{"id": "a1", "type": "A"}, {"id": "a2", "type": "A"}, {"id": "b1", "type": "B"}]
+    body = fleet_body(
+        vehicles=vehicles, start={"optimum": {"sample": sample, "requires": requires}}
+    )
+    r = client.post("/v1/fleets", json=body)
+    assert r.status_code == 201, r.text
+    fleet = r.json()
+    at = {v["id"]: v["position"] for v in fleet["vehicles"]}
+    # each type on the points of its own targets (cost 0 for every target); from the
+    # whole sample, the one B would stand at the 1-median of all twelve
+    assert {at["a1"]["edge"], at["a2"]["edge"]} == {edge(10), edge(200)}
+    assert (at["b1"]["edge"], at["b1"]["offset"]) == (edge(400), 0.0)
+    steps = client.get("/v1/fleets/f1/metrics").json()["step_size"]
+    _steps_match_counts(steps, fleet, ["a1", "a2"], a_targets)
+    _steps_match_counts(steps, fleet, ["b1"], b_targets)
+
+
+def test_targets_for_any_vehicle_count_for_every_type_of_an_optimum_start(
+    client: TestClient,
+) -> None:
+    a_targets: list[dict[str, Any]] = [{"edge": edge(10), "offset": 0.0}] * 6
+    b_targets: list[dict[str, Any]] = [{"edge": edge(400), "offset": 0.0}] * 4
+    anyone: list[dict[str, Any]] = [{"edge": edge(300), "offset": 0.0}] * 3
+    sample = a_targets + b_targets + anyone
+    requires: list[Any] = [["A"]] * 6 + [["B"]] * 4 + [None, [], None]
+    vehicles = [{"id": "a1", "type": "A"}, {"id": "a2", "type": "A"}, {"id": "b1", "type": "B"}]
+    body = fleet_body(
+        vehicles=vehicles, start={"optimum": {"sample": sample, "requires": requires}}
+    )
+    r = client.post("/v1/fleets", json=body)
+    assert r.status_code == 201, r.text
+    fleet = r.json()
+    at = {v["id"]: v["position"] for v in fleet["vehicles"]}
+    assert {at["a1"]["edge"], at["a2"]["edge"]} == {edge(10), edge(300)}
+    # the one B at the 1-median of its targets and the three for anyone: against every
+    # edge's start and every target point (a 1-median of points lies on one of them)
+    own = b_targets + anyone
+    points = [NetPosition(NET.edge_index[t["edge"]], 0.0) for t in own]
+    candidates = [NetPosition(e, 0.0) for e in range(NET.n_edges)]
+    best = float(SPACE.cost_matrix(candidates, points).sum(axis=1).min())
+    b1 = NetPosition(NET.edge_index[at["b1"]["edge"]], at["b1"]["offset"])
+    assert float(SPACE.cost_matrix([b1], points).sum()) == pytest.approx(best, rel=1e-9)
+    steps = client.get("/v1/fleets/f1/metrics").json()["step_size"]
+    _steps_match_counts(steps, fleet, ["a1", "a2"], a_targets + anyone)
+    _steps_match_counts(steps, fleet, ["b1"], own)
+
+
+@pytest.mark.parametrize(
+    ("requires", "detail"),
+    [
+        ([["A"]], "one entry per sample position"),
+        ([["A"], ["C"]], "requires[1]"),
+        ([["A", "A", "A"], None], "requires[0]"),
+        ([["A"], [""]], "start.optimum.requires.1.0"),
+    ],
+)
+def test_bad_requirements_of_an_optimum_start_change_nothing(
+    client: TestClient, requires: list[list[str] | None], detail: str
+) -> None:
+    sample = [{"edge": edge(10), "offset": 0.0}, {"edge": edge(400), "offset": 0.0}]
+    vehicles = [{"id": "a1", "type": "A"}, {"id": "a2", "type": "A"}, {"id": "b1", "type": "B"}]
+    body = fleet_body(
+        vehicles=vehicles, start={"optimum": {"sample": sample, "requires": requires}}
+    )
+    r = client.post("/v1/fleets", json=body)
+    assert r.status_code == 422, r.text
+    assert r.headers["content-type"] == "application/problem+json"
+    assert detail in r.text
+    assert client.get("/v1/fleets/f1").status_code == 404
+    assert client.get("/v1/fleets").json()["items"] == []
+
+
 def test_a_network_uploaded_through_one_instance_serves_another(
     db_url: str, make_client: Any
 ) -> None:
