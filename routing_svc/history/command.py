@@ -6,7 +6,7 @@ from one.
     routing-svc history import CALLS.csv --fleet ID [--db PATH | --database-url URL |
         --service-url URL [--net PATH]] [--on-bad-row refuse|skip] [--chunk-size N]
         [--report DIR] [--thresholds 300,600,900] [--consolidation-workers N]
-    routing-svc history create-fleet CALLS.csv --net NET --vehicles N --fleet ID [...]
+    routing-svc history create-fleet CALLS.csv --net NET --vehicles N|TYPE:N,... --fleet ID [...]
 
 In process (the default) the service's domain code runs on the database that
 ``serve`` uses (``--db``/``--database-url``, default ``var/routing_svc.db``); with
@@ -25,7 +25,11 @@ from typing import Any, cast
 
 from routing_svc.errors import InvalidInput
 from routing_svc.history.calls import read_calls
-from routing_svc.history.creation import history_fleet_spec, history_vehicle_types
+from routing_svc.history.creation import (
+    history_fleet_spec,
+    history_vehicle_types,
+    parse_vehicle_mix,
+)
 from routing_svc.history.places import (
     PlacedCalls,
     place_locally,
@@ -114,7 +118,12 @@ def add_parser(sub: Any) -> None:
     c = commands.add_parser("create-fleet", help="create a fleet at the p-median of a history")
     _where(c)
     c.add_argument("--net", required=True, help="network id, or NAME=PATH to register a file")
-    c.add_argument("--vehicles", type=int, required=True)
+    c.add_argument(
+        "--vehicles",
+        required=True,
+        help="how many identical vehicles (8), or of each type (A:5,B:3): each type "
+        "starts at the optimum of the calls that needed it and of those for any one",
+    )
     c.add_argument("--cost", choices=["length", "time"], default="length")
     c.add_argument("--seed", type=int, default=0)
     c.set_defaults(run=run_create)
@@ -202,8 +211,7 @@ def run_import(args: argparse.Namespace) -> int:
 
 
 def run_create(args: argparse.Namespace) -> int:
-    if args.vehicles < 1:
-        raise InvalidInput("--vehicles must be >= 1")
+    vehicles = parse_vehicle_mix(args.vehicles)
     table = read_calls(args.calls)
     name, sep, path = args.net.partition("=")
     with ExitStack() as stack:
@@ -214,7 +222,7 @@ def run_create(args: argparse.Namespace) -> int:
             from routing_svc.network.catalogue import resolve_network
 
             client.add_network(resolve_network(path), name=name)
-        types = history_vehicle_types(args.vehicles)  # the calls the new fleet can serve
+        types = history_vehicle_types(vehicles)  # the calls the new fleet can serve
         if isinstance(client, HttpHistoryClient):
             placed = place_on_network(
                 table, client, name, vehicle_types=types, progress=not args.quiet
@@ -228,7 +236,7 @@ def run_create(args: argparse.Namespace) -> int:
 
             raise HistoryRefused(bad)
         spec = history_fleet_spec(
-            table, placed, fleet_id=args.fleet, network=name, vehicles=args.vehicles,
+            table, placed, fleet_id=args.fleet, network=name, vehicles=vehicles,
             cost=args.cost, seed=args.seed,
         )  # fmt: skip
         fleet = client.create_fleet(spec)

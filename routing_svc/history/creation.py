@@ -10,11 +10,13 @@ thinned evenly to the route's limit when there are more.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from routing_svc.errors import InvalidInput
 from routing_svc.history.calls import CallTable
 from routing_svc.history.places import PlacedCalls
 from routing_svc.history.replay import time_order
@@ -37,21 +39,78 @@ def history_sample(table: CallTable, placed: PlacedCalls | None) -> list[dict[st
     the checked ``(edge, offset)`` positions, or without ``placed`` the places as the
     file gives them (the service then resolves them, and refuses a bad one)."""
     if placed is None:
-        order = np.argsort(table.seconds, kind="stable").astype(np.int64)
-        return [table.place(i) for i in _thinned(order)]
+        return [table.place(i) for i in _sample_rows(table, None)]
     return [
         {"edge": placed.edges[i], "offset": placed.offsets[i]}
         for i in _thinned(time_order(table, placed))
     ]
 
 
-def history_vehicles(vehicles: int) -> list[dict[str, Any]]:
-    """The vehicles of a fleet created from a history: ``vehicles`` identical ones."""
-    return [{"id": f"v{i:03d}"} for i in range(vehicles)]
+def history_sample_requires(
+    table: CallTable, placed: PlacedCalls | None
+) -> list[list[str] | None] | None:
+    """The types each call of :func:`history_sample` needed, in the same order (``None``
+    for a call that needed any one vehicle); ``None`` when no call names types."""
+    rows = _sample_rows(table, placed)
+    needs = [table.requires[r] for r in rows]
+    if all(n is None for n in needs):
+        return None
+    return [None if n is None else list(n) for n in needs]
 
 
-def history_vehicle_types(vehicles: int) -> list[str]:
-    """The type of each vehicle of :func:`history_vehicles` (the API's default type)."""
+def _sample_rows(table: CallTable, placed: PlacedCalls | None) -> list[int]:
+    """The table rows of :func:`history_sample`, in its order."""
+    if placed is None:
+        return _thinned(np.argsort(table.seconds, kind="stable").astype(np.int64))
+    return [int(placed.rows[i]) for i in _thinned(time_order(table, placed))]
+
+
+VehicleMix = int | Mapping[str, int]
+"""A fleet's vehicles: how many identical ones, or how many of each type."""
+
+
+def parse_vehicle_mix(text: str) -> VehicleMix:
+    """``"8"``: eight identical vehicles; ``"A:5,B:3"``: five of type A, three of type B.
+
+    Raises
+    ------
+    InvalidInput
+        Anything else, a count below 1, or a type named twice.
+    """
+    text = text.strip()
+    if ":" not in text:
+        try:
+            count = int(text)
+        except ValueError:
+            raise InvalidInput(f"--vehicles: a count or TYPE:COUNT,..., got {text!r}") from None
+        if count < 1:
+            raise InvalidInput("--vehicles must be >= 1")
+        return count
+    mix: dict[str, int] = {}
+    for part in text.split(","):
+        kind, _, number = part.strip().rpartition(":")
+        try:
+            count = int(number)
+        except ValueError:
+            raise InvalidInput(f"--vehicles: {part!r} is not TYPE:COUNT") from None
+        if not kind or count < 1 or kind in mix:
+            raise InvalidInput(f"--vehicles: {part!r} needs a type named once and a count >= 1")
+        mix[kind] = count
+    return mix
+
+
+def history_vehicles(vehicles: VehicleMix) -> list[dict[str, Any]]:
+    """The vehicles of a fleet created from a history: ``vehicles`` identical ones, or so
+    many of each type (ids in the mix's order)."""
+    if isinstance(vehicles, int):
+        return [{"id": f"v{i:03d}"} for i in range(vehicles)]
+    kinds = [kind for kind, count in vehicles.items() for _ in range(count)]
+    return [{"id": f"v{i:03d}", "type": kind} for i, kind in enumerate(kinds)]
+
+
+def history_vehicle_types(vehicles: VehicleMix) -> list[str]:
+    """The type of each vehicle of :func:`history_vehicles` (the API's default type for
+    identical ones)."""
     return [VehicleSpec.model_validate(v).type for v in history_vehicles(vehicles)]
 
 
@@ -61,17 +120,22 @@ def history_fleet_spec(
     *,
     fleet_id: str,
     network: str,
-    vehicles: int,
+    vehicles: VehicleMix,
     cost: str = "length",
     seed: int = 0,
 ) -> dict[str, Any]:
-    """The ``POST /v1/fleets`` body of ``vehicles`` identical vehicles at the history's
-    p-median."""
+    """The ``POST /v1/fleets`` body of a fleet at the history's optimum: ``vehicles``
+    identical ones at its p-median, or of several types, each type at the optimum of the
+    calls that needed it (``start.optimum.requires``: the calls' types)."""
+    optimum: dict[str, Any] = {"sample": history_sample(table, placed)}
+    requires = history_sample_requires(table, placed)
+    if requires is not None:
+        optimum["requires"] = requires
     return {
         "id": fleet_id,
         "network": network,
         "cost": cost,
         "seed": seed,
         "vehicles": history_vehicles(vehicles),
-        "start": {"optimum": {"sample": history_sample(table, placed)}},
+        "start": {"optimum": optimum},
     }

@@ -63,3 +63,56 @@ def test_a_server_refuses_or_skips_the_calls_the_new_fleet_cannot_serve(
     ]
     assert [r["line"] for r in here["bad_rows"]] == bad
     assert (here["sample"], here["vehicles"]) == (report["sample"], report["vehicles"])
+
+
+def test_a_fleet_of_several_types_starts_each_type_at_the_calls_that_needed_it(
+    tmp_path: Path, drt: CompiledNetwork
+) -> None:
+    a_edges, b_edge = [drt.edge_ids[10], drt.edge_ids[200]], drt.edge_ids[400]
+    rows: list[list[object]] = [[t, a_edges[t % 2], 0.0, "A"] for t in range(8)]
+    rows += [[100 + t, b_edge, 0.0, "B"] for t in range(4)]
+    path = write_csv(tmp_path / "ab.csv", ["time", "edge", "offset", "types"], rows)
+    create = ["history", "create-fleet", str(path), "--fleet", "f", "--quiet"]
+    local = cli(
+        *create, "--net", "drt=drt", "--db", str(tmp_path / "l.db"), "--vehicles", "A:2,B:1"
+    )
+    assert local.returncode == 0, local.stderr
+    server = LiveServer(f"sqlite:///{tmp_path / 'server.db'}", tmp_path).start()
+    try:
+        remote = [*create, "--net", "drt", "--service-url", server.url, "--vehicles", "A:2,B:1"]
+        served = cli(*remote)
+        assert served.returncode == 0, served.stderr
+        fleet = httpx.get(f"{server.url}/v1/fleets/f").json()
+    finally:
+        server.stop()
+    assert json.loads(local.stdout)["vehicles"] == json.loads(served.stdout)["vehicles"]
+    kinds = {v["id"]: v["type"] for v in fleet["vehicles"]}
+    assert kinds == {"v000": "A", "v001": "A", "v002": "B"}
+    at = {v["id"]: v["position"]["edge"] for v in fleet["vehicles"]}
+    # each type on its own calls' points; the one B would stand nearer the eight A calls
+    # at the p-median of all twelve
+    assert {at["v000"], at["v001"]} == set(a_edges) and at["v002"] == b_edge
+
+
+def test_a_bad_vehicle_mix_is_refused_and_creates_nothing(
+    tmp_path: Path, drt: CompiledNetwork
+) -> None:
+    path = calls_file(tmp_path, drt)
+    db = str(tmp_path / "bad.db")
+    for mix, said in [
+        ("0", "--vehicles must be >= 1"),
+        ("two", "a count or TYPE:COUNT"),
+        ("A:2,A:1", "named once"),
+        ("A:0", "count >= 1"),
+        ("A:x", "is not TYPE:COUNT"),
+    ]:
+        out = cli("history", "create-fleet", str(path), "--fleet", "f", "--net", "drt=drt",
+                  "--db", db, "--quiet", "--vehicles", mix)  # fmt: skip
+        assert out.returncode == 2, (mix, out.stderr)
+        assert said in out.stderr and "Traceback" not in out.stderr, (mix, out.stderr)
+    # no fleet "f" was made: creating it now succeeds (a second would conflict)
+    ok = ["history", "create-fleet", str(path), "--fleet", "f", "--net", "drt=drt"]
+    ok += ["--db", db, "--quiet", "--vehicles", "2", "--on-bad-row", "skip"]
+    assert cli(*ok).returncode == 0
+    again = cli(*ok)
+    assert again.returncode == 2 and "already exists" in again.stderr, again.stderr
