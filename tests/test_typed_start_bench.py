@@ -1,0 +1,56 @@
+"""``bench/typed_start.py`` prints one JSON document whose summary is that of its records,
+and refuses bad options before any work."""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run(tmp_path: Path, *options: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "typed_start.py"), *options],
+        capture_output=True, text=True, timeout=600, cwd=tmp_path,
+    )  # fmt: skip
+
+
+def test_typed_start_report_is_its_records(tmp_path: Path) -> None:
+    done = run(tmp_path, "--nets", "grid", "--calls", "60", "--seeds", "0,1,2")
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    records = report["records"]
+    assert [(r["network"], r["calls"], r["seed"]) for r in records] == [
+        ("grid", 60, 0),
+        ("grid", 60, 1),
+        ("grid", 60, 2),
+    ]
+    for r in records:
+        assert set(r["gaps"]) == {"own_calls", "all_calls"}
+        assert all(math.isfinite(g) and g > -0.5 for g in r["gaps"].values())
+    summary = report["by_calls"]["60"]
+    medians = {
+        rule: statistics.median(r["gaps"][rule] for r in records)
+        for rule in ("own_calls", "all_calls")
+    }
+    for rule, median in medians.items():
+        assert summary[rule]["worst"] == [median, "grid/hotspots:3/60"]
+        assert summary[rule]["mean_of_medians"] == median
+    assert summary["ratio_own_over_all"] == medians["own_calls"] / medians["all_calls"]
+
+
+def test_typed_start_refuses_bad_options_before_any_work(tmp_path: Path) -> None:
+    for options, message in (
+        (["--nets", "nosuch"], "'nosuch' is neither a known network"),
+        (["--calls", "5"], "a history needs at least 8 calls"),
+        (["--demand", "bogus:1"], "--demand must be"),
+    ):
+        done = run(tmp_path, *options)
+        assert done.returncode == 2, (options, done.stderr)
+        assert message in done.stderr.strip().splitlines()[-1]
+        assert done.stdout == ""
