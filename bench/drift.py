@@ -28,11 +28,11 @@ from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
-from learning import NETWORKS, gap, instance, network_file, network_name
+from bench_shared import NETWORKS, finished, network_name, refuse_unknown
+from learning import gap, instance
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.demand import network as network_demand
-from routing_svc.errors import InvalidInput, UnknownNetwork
 from routing_svc.network import CompiledNetwork
 from routing_svc.optimum import solve_demand
 from routing_svc.sa import Fleet, Objective, Vehicle, learning_config
@@ -178,11 +178,7 @@ def main() -> int:
     p.add_argument("--hold", type=int, default=10_000)
     p.add_argument("--jobs", type=int, default=2)
     args = p.parse_args()
-    try:
-        for net in args.nets.split(","):
-            network_file(net)
-    except (InvalidInput, UnknownNetwork) as e:
-        p.error(str(e))
+    refuse_unknown(p, args.nets.split(","))
     if args.drift < 4 * STAGE or args.drift % (4 * STAGE):
         p.error(f"--drift must be a positive multiple of {4 * STAGE}")
     if args.settle < 1 or args.hold < 1 or args.jobs < 1:
@@ -204,10 +200,8 @@ def main() -> int:
         "drift": args.drift,
         "hold": args.hold,
         **summarise(records),
-        "records": records,
-        "seconds": time.perf_counter() - started,
     }
-    print(json.dumps(report, indent=1))
+    print(json.dumps(finished(report, records, started), indent=1))
     return 0
 
 

@@ -46,20 +46,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from learning import (
-    DEFAULT_DEMAND,
-    NETWORKS,
-    Instance,
-    instance,
-    network_file,
-    network_name,
-    rest_run,
-    wire,
-)
+from bench_shared import NETWORKS, finished, network_name, refuse_unknown
+from learning import DEFAULT_DEMAND, Instance, instance, rest_run, wire
 
 from routing_svc.demand import DemandDistribution
-from routing_svc.demand.spec import parse_demand_spec
-from routing_svc.errors import InvalidInput, UnknownNetwork
 from routing_svc.optimum import solve_demand
 from routing_svc.optimum.heterogeneous import (
     RequirementClass,
@@ -291,12 +281,7 @@ def main() -> int:
     )
     p.add_argument("--rest", action="store_true", help="add one cold curve through the REST API")
     args = p.parse_args()
-    try:
-        for net in args.nets.split(","):
-            network_file(net)
-        parse_demand_spec(args.demand)
-    except (InvalidInput, UnknownNetwork) as e:
-        p.error(str(e))
+    refuse_unknown(p, args.nets.split(","), [args.demand])
     if args.targets < min(CHECKPOINTS) or args.jobs < 1:
         p.error(f"--targets must be at least {min(CHECKPOINTS)} and --jobs at least 1")
     if any(n < 2 for n in args.vehicles):
@@ -319,9 +304,8 @@ def main() -> int:
         "gap": "exact expected cost of objective (11) / optimum - 1",
         **summarise(records),
         "same_as_per_type": sum(r["consolidating"] == r[PER_TYPE] for r in records),
-        "records": records,
-        "seconds": time.perf_counter() - started,
     }
+    report = finished(report, records, started)
     if args.rest:
         net, n, seed = args.nets.split(",")[0], args.vehicles[0], args.seeds[0]
         curve = rest_curve(net, n, seed, args.targets, args.mix, args.demand)

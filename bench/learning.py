@@ -50,28 +50,18 @@ from typing import Any
 
 import httpx
 import numpy as np
+from bench_shared import NETWORKS, finished, network_file, network_name, refuse_unknown
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.demand.spec import DemandRecipe, Hotspots, network_demand, parse_demand_spec
-from routing_svc.errors import InvalidInput, UnknownNetwork
+from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork, RoadSpace, load_network
-from routing_svc.network.catalogue import named_network, resolve_network
 from routing_svc.network.costs import CostKind
 from routing_svc.optimum import MAX_SITES, expected_cost, solve_demand, solve_pmedian
 from routing_svc.optimum import gap as relative_gap
 from routing_svc.sa import Fleet, Objective, Rule, Vehicle, learning_config
 from routing_svc.types import FloatArray, NetPosition
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "nets"
-NETWORKS = {
-    "drt": "drt",
-    "bs3d": "bs3d",
-    "badhersfeld": str(SHARED / "badhersfeld.net.xml.gz"),
-    "bologna": str(SHARED / "bologna.net.xml.gz"),
-    "grid": "grid",
-    "spider": "spider",
-    "oneway": "oneway",
-}
 DEFAULT_DEMAND = "hotspots:3"
 CHECKPOINTS = (300, 1000, 3000, 10000, 30000)
 SHIFT_AT = 10000
@@ -84,17 +74,6 @@ GOALS: dict[str, Any] = {
     "anchor_points": 0.01,
     "compute_ratio": 2.0,
 }
-
-
-def network_name(net: str) -> str:
-    """The name a ``--nets`` entry is reported under (``NAME`` or ``NAME=FILE``)."""
-    return named_network(net)[0]
-
-
-def network_file(net: str) -> str:
-    """The SUMO network of a ``--nets`` entry: a known name, or ``NAME=FILE``."""
-    path = named_network(net)[1]
-    return str(resolve_network(NETWORKS.get(path, path)))
 
 
 @dataclass(frozen=True)
@@ -599,15 +578,8 @@ def main() -> int:
     rules = tuple(Rule(r).value for r in args.rules.split(","))
     scenarios = tuple(args.scenarios.split(","))
     nets = args.nets.split(",")
-    try:
-        for net in nets:
-            network_file(net)
-    except (InvalidInput, UnknownNetwork) as e:
-        p.error(f"{e}; this benchmark's networks: {', '.join(NETWORKS)}, or NAME=FILE")
-    try:
-        form = parse_demand_spec(args.demand).form
-    except InvalidInput as e:
-        p.error(str(e))
+    refuse_unknown(p, nets, [args.demand])
+    form = parse_demand_spec(args.demand).form
     if args.spread is not None and not (math.isfinite(args.spread) and args.spread > 0.0):
         p.error("--spread must be a fraction > 0")
     if "shift" in scenarios and not isinstance(form, Hotspots):
@@ -646,9 +618,8 @@ def main() -> int:
         "optimum": f"best p-median found over at most {MAX_SITES} candidate sites",
         "goals": {rule: goals(summary, rule, "probe") for rule in rules if "probe" in rules},
         **summary,
-        "records": records,
-        "seconds": time.perf_counter() - started,
     }
+    report = finished(report, records, started)
     if args.rest:
         report["rest"] = rest_curve(
             nets[0],

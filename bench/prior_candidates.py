@@ -25,16 +25,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import time
 from typing import Any
 
 import numpy as np
-from learning import NETWORKS, gap, instance, network_file
+from bench_shared import (
+    NETWORKS,
+    finished,
+    medians_over_seeds,
+    refuse_unknown,
+    worst_and_mean_by_size,
+)
+from learning import gap, instance
 
 from routing_svc.demand import DemandDistribution
-from routing_svc.demand.spec import parse_demand_spec
-from routing_svc.errors import InvalidInput, UnknownNetwork
 from routing_svc.network import RoadSpace
 from routing_svc.optimum import MAX_SITES, candidate_sites, solve_demand
 from routing_svc.sim.command import parse_seeds
@@ -95,26 +99,14 @@ def job(net: str, n: int, demand: str, size: int, seed: int) -> dict[str, Any]:
 
 def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
     """Medians over seeds per case; per sample size, the mean and the worst of them."""
-    cases: dict[str, list[dict[str, Any]]] = {}
-    for r in records:
-        key = f"{r['network']}/{r['vehicles']}/{r['demand']}/{r['sample']}"
-        cases.setdefault(key, []).append(r)
-    medians = {
-        key: {rule: statistics.median(r["gaps"][rule] for r in rs) for rule in RULES}
-        for key, rs in cases.items()
-    }
-    by_size: dict[str, Any] = {}
-    for size in sorted({r["sample"] for r in records}):
-        rows = {k: v for k, v in medians.items() if k.endswith(f"/{size}")}
-        by_size[str(size)] = {
-            rule: {
-                "mean_of_medians": statistics.fmean(v[rule] for v in rows.values()),
-                "worst": max((v[rule], k) for k, v in rows.items()),
-                "ratio_to_default": statistics.fmean(v[rule] for v in rows.values())
-                / statistics.fmean(v["default"] for v in rows.values()),
-            }
-            for rule in RULES
-        }
+    medians = medians_over_seeds(
+        records, lambda r: f"{r['network']}/{r['vehicles']}/{r['demand']}/{r['sample']}", RULES
+    )
+    by_size = worst_and_mean_by_size(medians, (r["sample"] for r in records), RULES)
+    for summary in by_size.values():
+        default = summary["default"]["mean_of_medians"]
+        for rule in RULES:
+            summary[rule]["ratio_to_default"] = summary[rule]["mean_of_medians"] / default
     return {"median_over_seeds": medians, "by_sample_size": by_size}
 
 
@@ -126,13 +118,7 @@ def main() -> int:
     p.add_argument("--samples", type=parse_seeds, default="300,1000")
     p.add_argument("--seeds", type=parse_seeds, default="0,1,2")
     args = p.parse_args()
-    try:
-        for net in args.nets.split(","):
-            network_file(net)
-        for demand in args.demands.split(","):
-            parse_demand_spec(demand)
-    except (InvalidInput, UnknownNetwork) as e:
-        p.error(str(e))
+    refuse_unknown(p, args.nets.split(","), args.demands.split(","))
     if min(args.vehicles) < 1:
         p.error("--vehicles: a fleet has at least one vehicle")
     if min(args.samples) < max(args.vehicles):
@@ -151,10 +137,8 @@ def main() -> int:
         "baseline": "default (the service's candidate sites of a sample)",
         "gap": "exact expected cost on the demand, relative to its optimum",
         **summarise(records),
-        "records": records,
-        "seconds": time.perf_counter() - started,
     }
-    print(json.dumps(report, indent=1))
+    print(json.dumps(finished(report, records, started), indent=1))
     return 0
 
 

@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -33,10 +32,18 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from learning import DEFAULT_DEMAND, NETWORKS, network_file, network_name
+from bench_shared import (
+    NETWORKS,
+    finished,
+    medians_over_seeds,
+    network_file,
+    network_name,
+    refuse_unknown,
+    worst_and_mean_by_size,
+)
+from learning import DEFAULT_DEMAND
 
 from routing_svc.demand.spec import network_demand, parse_demand_spec
-from routing_svc.errors import InvalidInput, UnknownNetwork
 from routing_svc.network import RoadSpace, load_network
 from routing_svc.optimum import expected_cost, solve_demand
 from routing_svc.sim.command import parse_seeds
@@ -117,26 +124,13 @@ def job(net: str, demand: str, calls: int, seed: int) -> dict[str, Any]:
 
 def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
     """Medians over seeds per case; per sample size, the worst network and the mean."""
-    cases: dict[str, list[dict[str, Any]]] = {}
-    for r in records:
-        cases.setdefault(f"{r['network']}/{r['demand']}/{r['calls']}", []).append(r)
-    medians = {
-        key: {rule: statistics.median(r["gaps"][rule] for r in rs) for rule in RULES}
-        for key, rs in cases.items()
-    }
-    by_size: dict[str, Any] = {}
-    for size in sorted({r["calls"] for r in records}):
-        rows = {k: v for k, v in medians.items() if k.endswith(f"/{size}")}
-        by_size[str(size)] = {
-            rule: {
-                "worst": max((v[rule], k) for k, v in rows.items()),
-                "mean_of_medians": statistics.fmean(v[rule] for v in rows.values()),
-            }
-            for rule in RULES
-        }
-        mean_own = by_size[str(size)]["own_calls"]["mean_of_medians"]
-        mean_all = by_size[str(size)]["all_calls"]["mean_of_medians"]
-        by_size[str(size)]["ratio_own_over_all"] = mean_own / mean_all if mean_all else None
+    medians = medians_over_seeds(
+        records, lambda r: f"{r['network']}/{r['demand']}/{r['calls']}", RULES
+    )
+    by_size: dict[str, Any] = worst_and_mean_by_size(medians, (r["calls"] for r in records), RULES)
+    for summary in by_size.values():
+        own, every = (summary[rule]["mean_of_medians"] for rule in RULES)
+        summary["ratio_own_over_all"] = own / every if every else None
     return {"median_over_seeds": medians, "by_calls": by_size}
 
 
@@ -147,12 +141,7 @@ def main() -> int:
     p.add_argument("--calls", type=parse_seeds, default="300,1000")
     p.add_argument("--seeds", type=parse_seeds, default="0,1,2,3,4")
     args = p.parse_args()
-    try:
-        for net in args.nets.split(","):
-            network_file(net)
-        parse_demand_spec(args.demand)
-    except (InvalidInput, UnknownNetwork) as e:
-        p.error(str(e))
+    refuse_unknown(p, args.nets.split(","), [args.demand])
     if min(args.calls) < sum(MIX.values()):
         p.error(f"--calls: a history needs at least {sum(MIX.values())} calls")
     started = time.perf_counter()
@@ -169,10 +158,8 @@ def main() -> int:
         "baseline": "all_calls (each type at the p-median of every call, the same run)",
         "gap": "objective (11) on the two demands, relative to the per-type optima",
         **summarise(records),
-        "records": records,
-        "seconds": time.perf_counter() - started,
     }
-    print(json.dumps(report, indent=1))
+    print(json.dumps(finished(report, records, started), indent=1))
     return 0
 
 

@@ -265,6 +265,20 @@ def _steps_match_counts(
         assert steps[v] == pytest.approx(a / (k + 1) ** power)
 
 
+def _two_a_and_one_b_at_the_optimum_of(
+    client: TestClient, sample: list[dict[str, Any]], requires: list[Any]
+) -> dict[str, Any]:
+    """Create ``f1``, vehicles a1, a2 (type A) and b1 (B), at the optimum of ``sample``."""
+    vehicles = [{"id": "a1", "type": "A"}, {"id": "a2", "type": "A"}, {"id": "b1", "type": "B"}]
+    body = fleet_body(
+        vehicles=vehicles, start={"optimum": {"sample": sample, "requires": requires}}
+    )
+    r = client.post("/v1/fleets", json=body)
+    assert r.status_code == 201, r.text
+    fleet: dict[str, Any] = r.json()
+    return fleet
+
+
 def test_each_type_starts_at_the_optimum_of_the_sample_targets_that_needed_it(
     client: TestClient,
 ) -> None:
@@ -273,13 +287,7 @@ def test_each_type_starts_at_the_optimum_of_the_sample_targets_that_needed_it(
     b_targets: list[dict[str, Any]] = [{"edge": edge(400), "offset": 0.0}] * 4
     sample = a_targets + b_targets
     requires: list[Any] = [["A"]] * len(a_targets) + [["B"]] * len(b_targets)
-    vehicles = [{"id": "a1", "type": "A"}, {"id": "a2", "type": "A"}, {"id": "b1", "type": "B"}]
-    body = fleet_body(
-        vehicles=vehicles, start={"optimum": {"sample": sample, "requires": requires}}
-    )
-    r = client.post("/v1/fleets", json=body)
-    assert r.status_code == 201, r.text
-    fleet = r.json()
+    fleet = _two_a_and_one_b_at_the_optimum_of(client, sample, requires)
     at = {v["id"]: v["position"] for v in fleet["vehicles"]}
     # each type on the points of its own targets (cost 0 for every target); from the
     # whole sample, the one B would stand at the 1-median of all twelve
@@ -298,13 +306,7 @@ def test_targets_for_any_vehicle_count_for_every_type_of_an_optimum_start(
     anyone: list[dict[str, Any]] = [{"edge": edge(300), "offset": 0.0}] * 3
     sample = a_targets + b_targets + anyone
     requires: list[Any] = [["A"]] * 6 + [["B"]] * 4 + [None, [], None]
-    vehicles = [{"id": "a1", "type": "A"}, {"id": "a2", "type": "A"}, {"id": "b1", "type": "B"}]
-    body = fleet_body(
-        vehicles=vehicles, start={"optimum": {"sample": sample, "requires": requires}}
-    )
-    r = client.post("/v1/fleets", json=body)
-    assert r.status_code == 201, r.text
-    fleet = r.json()
+    fleet = _two_a_and_one_b_at_the_optimum_of(client, sample, requires)
     at = {v["id"]: v["position"] for v in fleet["vehicles"]}
     assert {at["a1"]["edge"], at["a2"]["edge"]} == {edge(10), edge(300)}
     # the one B at the 1-median of its targets and the three for anyone: against every
