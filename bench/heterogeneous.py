@@ -68,8 +68,14 @@ MIXES = {
         RequirementClass(("B",), 1 / 3),
         RequirementClass(("A", "B"), 1 / 3),
     ),
+    "mostly-any": (
+        RequirementClass((), 0.6),
+        RequirementClass(("A",), 0.2),
+        RequirementClass(("B",), 0.2),
+    ),
 }
-"""Requirement mixes: each target needs one A or one B; or a third of them an A and a B."""
+"""Requirement mixes: each target needs one A or one B; or a third of them an A and a B;
+or most (60 %) any one vehicle, the rest one A or one B."""
 RULES = ("probe", "paper", "consolidating")
 PER_TYPE = "per_type"
 SCENARIOS = ("cold", "warm")

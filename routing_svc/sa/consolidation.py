@@ -155,6 +155,10 @@ class ConsolidationPolicy:
         neighbourhood search until this many shakes in a row found nothing better
         (:func:`routing_svc.sa.interchange.neighbourhood_search`); 0: the local
         optimum is kept.
+    shared_targets : bool
+        In a fleet that learns per type, a target that needed any one vehicle feeds
+        every type, each pricing it by the first arrival of the others
+        (:meth:`ConsolidationJob.ceilings`); else it feeds none.
     """
 
     reservoir: int = 4000
@@ -175,6 +179,7 @@ class ConsolidationPolicy:
     fresh_baseline: bool = True
     checked_moves: bool = True
     shakes: int = 20
+    shared_targets: bool = True
 
     def __post_init__(self) -> None:
         for name in ("reservoir", "first", "longest", "block", "folds"):
@@ -213,7 +218,7 @@ class ConsolidationPolicy:
             raise InvalidInput("consolidation refit must be a finite number > 1, or null")
         if isinstance(self.shakes, bool) or not isinstance(self.shakes, int) or self.shakes < 0:
             raise InvalidInput(f"consolidation shakes must be an integer >= 0, got {self.shakes!r}")
-        for flag in ("tested_refit", "fresh_baseline", "checked_moves"):
+        for flag in ("tested_refit", "fresh_baseline", "checked_moves", "shared_targets"):
             if not isinstance(getattr(self, flag), bool):
                 raise InvalidInput(f"consolidation {flag} must be true or false")
 
@@ -239,6 +244,7 @@ class ConsolidationPolicy:
             **({} if self.tested_refit else {"tested_refit": False}),
             **({"fresh_baseline": True} if self.fresh_baseline else {}),
             **({"checked_moves": True} if self.checked_moves else {}),
+            **({"shared_targets": True} if self.shared_targets else {}),
             **({"shakes": self.shakes} if self.shakes else {}),
             **({"shift_confidence": self.shift_confidence} if self.shift_confidence else {}),
             **(
@@ -252,11 +258,12 @@ class ConsolidationPolicy:
     def from_dict(cls, data: dict[str, Any]) -> ConsolidationPolicy:
         """A stored policy; one stored without ``refit``, ``tested_refit``,
         ``fresh_baseline``, ``checked_moves``, ``shakes``, ``slowest``,
-        ``settled_confidence``, ``shift_confidence``, ``unfitted_confidence`` or
-        ``hasten`` keeps the behaviour it was stored with (no refit, a refit tested, the
-        reservoir's baseline, unchecked moves, no shakes, the epoch's clock alone, one
-        confidence throughout, the shift test's ratio alone, no more asked of references
-        no consolidation fitted, a clock that runs from the epoch's start)."""
+        ``settled_confidence``, ``shift_confidence``, ``unfitted_confidence``,
+        ``hasten`` or ``shared_targets`` keeps the behaviour it was stored with (no
+        refit, a refit tested, the reservoir's baseline, unchecked moves, no shakes, the
+        epoch's clock alone, one confidence throughout, the shift test's ratio alone, no
+        more asked of references no consolidation fitted, a clock that runs from the
+        epoch's start, targets for any one vehicle feeding no type)."""
         if not isinstance(data, dict):
             raise InvalidInput("consolidation must be an object")
         legacy = {
@@ -268,6 +275,7 @@ class ConsolidationPolicy:
             "shift_confidence": 0.0,
             "unfitted_confidence": 0.0,
             "hasten": None,
+            "shared_targets": False,
         }
         unknown = set(data) - {*cls().to_dict(), *legacy, "slowest", "settled_confidence"}
         if unknown:
@@ -472,6 +480,7 @@ def consolidate(
     stands: StandSet[P] | None = None,
     shakes: int = 0,
     floors: Sequence[float] | None = None,
+    ceilings: Sequence[float] | None = None,
 ) -> Consolidation[P]:
     """Solve the reservoir without each fold, test on that fold, solve all if it pays.
 
@@ -522,6 +531,12 @@ def consolidate(
         of the plain costs improved by the fast interchange on these
         (:func:`priced_fit`); the test and the costs recorded use these. Not with
         ``stands``.
+    ceilings : sequence of float, optional
+        Per reservoir target, a cost ``u`` above which it is served anyway
+        (:meth:`ConsolidationJob.ceilings`: the first arrival of the other types, for a
+        target that needed any one vehicle; ``inf`` for none). A target then costs
+        ``max(min(c, u), f)``: with ``floors``, objective (11) with the other types
+        fixed. Fitted, tested and recorded as with ``floors``. Not with ``stands``.
     """
     p = len(positions)
     if len(reservoir) < 2 or len(anchor) != p or len(updates) != p:
@@ -532,10 +547,27 @@ def consolidate(
         raise InvalidInput("floors need one value per reservoir target, and no stands")
     if floors is not None and not all(math.isfinite(f) and f >= 0.0 for f in floors):
         raise InvalidInput("floors must be finite and >= 0")
-    priced = floors is not None and any(f > 0.0 for f in floors)
-    entries: list[Any] = list(zip(reservoir, floors or (), strict=True)) if priced else [*reservoir]
-    keys = list(dict.fromkeys(entries))  # a column per target, and per floor when priced
-    targets = [z for z, _ in keys] if priced else keys
+    if ceilings is not None and (len(ceilings) != len(reservoir) or stands is not None):
+        raise InvalidInput("ceilings need one value per reservoir target, and no stands")
+    if ceilings is not None and not all(u >= 0.0 for u in ceilings):  # NaN fails too
+        raise InvalidInput("ceilings must be >= 0 (inf: none)")
+    floored = floors is not None and any(f > 0.0 for f in floors)
+    capped = ceilings is not None and any(math.isfinite(u) for u in ceilings)
+    priced = floored or capped
+    entries: list[Any] = (
+        list(
+            zip(
+                reservoir,
+                floors if floors is not None and floored else [0.0] * len(reservoir),
+                ceilings if ceilings is not None and capped else [math.inf] * len(reservoir),
+                strict=True,
+            )
+        )
+        if priced
+        else [*reservoir]
+    )
+    keys = list(dict.fromkeys(entries))  # a column per target, and per price when priced
+    targets = [z for z, _, _ in keys] if priced else keys
     column = {z: j for j, z in enumerate(keys)}
     places = np.fromiter((column[z] for z in entries), dtype=np.int64, count=len(reservoir))
     parts = [
@@ -563,7 +595,8 @@ def consolidate(
     costs **= power
     plain = costs
     if priced:
-        costs = np.maximum(plain, np.array([f for _, f in keys]))
+        ceiling = np.array([u for _, _, u in keys])
+        costs = np.maximum(np.minimum(plain, ceiling), np.array([f for _, f, _ in keys]))
     now = costs[actual].min(axis=0)
     before = float(weight @ now) / float(weight.sum())
 
@@ -632,6 +665,10 @@ def consolidate(
     return taken(gain, standard_error, fresh_before)
 
 
+ANY_VEHICLE: tuple[str, ...] = ("",)
+"""The partners kept for a target that needed any one vehicle (no type is named ``""``):
+the first arrival of every type serves it (:meth:`ConsolidationJob.ceilings`)."""
+
 ConsolidationKey = tuple[int, int, int]
 """Which due consolidation a job is for: the first vehicle of the group it moves (0 for
 the whole fleet), the group's epoch and the count it was due at (both only grow, so a
@@ -671,21 +708,46 @@ class ConsolidationJob(Generic[P]):
         """Per reservoir target, ``c(T)`` of the last arrival of the other types it
         needed, each from its closest current reference (0 for a target of this type
         alone; ``None`` when no target needed another type)."""
-        need = [i for i, kinds in enumerate(self.partners) if kinds]
-        if not need or not self.others:
+        need = [i for i, kinds in enumerate(self.partners) if kinds and kinds != ANY_VEHICLE]
+        found = self._others_times(need)
+        if found is None:
             return None
-        places = list(dict.fromkeys(self.reservoir[i] for i in need))
-        column = {z: j for j, z in enumerate(places)}
-        times = {
-            kind: np.asarray(self.space.cost_matrix(list(refs), places)).min(axis=0) / speed
-            for kind, refs, speed in self.others
-        }
+        times, column = found
         out = [0.0] * len(self.reservoir)
         for i in need:
             j = column[self.reservoir[i]]
             last = max((float(times[k][j]) for k in self.partners[i] if k in times), default=0.0)
             out[i] = last**self.power
         return out
+
+    def ceilings(self) -> list[float] | None:
+        """Per reservoir target that needed any one vehicle (partners
+        :data:`ANY_VEHICLE`), ``c(T)`` of the first arrival of the other types, each
+        from its closest current reference (``inf`` for the other targets; ``None`` when
+        no target needed any one vehicle)."""
+        need = [i for i, kinds in enumerate(self.partners) if kinds == ANY_VEHICLE]
+        found = self._others_times(need)
+        if found is None:
+            return None
+        times, column = found
+        out = [math.inf] * len(self.reservoir)
+        for i in need:
+            j = column[self.reservoir[i]]
+            out[i] = min(float(t[j]) for t in times.values()) ** self.power
+        return out
+
+    def _others_times(self, need: list[int]) -> tuple[dict[str, FloatArray], dict[P, int]] | None:
+        """Each other type's time from its closest current reference to each distinct
+        place of the reservoir targets ``need``, and each place's column; ``None`` for
+        no such target or no other type."""
+        if not need or not self.others:
+            return None
+        places = list(dict.fromkeys(self.reservoir[i] for i in need))
+        times = {
+            kind: np.asarray(self.space.cost_matrix(list(refs), places)).min(axis=0) / speed
+            for kind, refs, speed in self.others
+        }
+        return times, {z: j for j, z in enumerate(places)}
 
     def solve(self) -> Consolidation[P]:
         """:func:`consolidate` on the copied inputs."""
@@ -705,6 +767,7 @@ class ConsolidationJob(Generic[P]):
             stands=self.stands,
             shakes=self.shakes,
             floors=self.floors(),
+            ceilings=self.ceilings(),
         )
 
 

@@ -47,6 +47,7 @@ import numpy as np
 from routing_svc.errors import Conflict, InvalidInput, NotFound, ReplayMismatch
 from routing_svc.sa.annealing import Annealing
 from routing_svc.sa.consolidation import (
+    ANY_VEHICLE,
     NO_SHIFT_RUN,
     Consolidation,
     ConsolidationJob,
@@ -813,13 +814,19 @@ class Fleet(Generic[P]):
         learns per type (:attr:`learns_per_type`), each type the target needs, in name
         order; a consolidation of a type prices a target that needed other types too by
         its last arrival, theirs from their current references
-        (:meth:`ConsolidationJob.floors`). Other targets feed none.
+        (:meth:`ConsolidationJob.floors`). A target that needs any one vehicle feeds
+        every type, each pricing it by the first arrival of the others
+        (:meth:`ConsolidationJob.ceilings`), under
+        :attr:`ConsolidationPolicy.shared_targets`; else none.
         """
         if self._type_groups is None:
             learning = self.state.learning
             return [] if requires or learning is None else [(learning, cost, ())]
         if not requires:
-            return []
+            policy = self.config.consolidation
+            if policy is None or not policy.shared_targets:
+                return []
+            return [(learning, cost, ANY_VEHICLE) for learning in self.state.type_learning.values()]
         kinds = sorted(set(requires))
         return [
             (self.state.type_learning[k], cost, tuple(o for o in kinds if o != k)) for k in kinds

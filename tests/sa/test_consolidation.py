@@ -285,6 +285,63 @@ def test_targets_of_several_types_are_priced_by_their_last_arrival(
     assert no_swap_improves(costs, [sites.index(x) for x in done.positions], value)
 
 
+@pytest.mark.parametrize(("p", "power", "speed"), [(2, 1.0, 1.0), (3, 1.0, 1.0), (2, 2.0, 0.8)])
+def test_targets_for_any_vehicle_are_priced_by_the_first_arrival(
+    space: RoadSpace, p: int, power: float, speed: float
+) -> None:
+    _, targets = demand_stream(1, 10)
+    reservoir = duplicated(targets)  # each target twice: of this type, or for anyone
+    m = len(reservoir)
+    start = poor_start(p)
+
+    def run(ceilings: list[float] | None) -> Consolidation[NetPosition]:
+        return consolidate(
+            space, start, start, reservoir, power=power, speed=speed, confidence=0.0,
+            updates=[7] * p, fresh=m, ceilings=ceilings,
+        )  # fmt: skip
+
+    plain = run(None)
+    # the other type's one reference (speed 1) where the plain fit puts one of this type,
+    # and every target for anyone but the first place's own
+    other = plain.positions[0]
+    arrival = service_costs(space, [other], reservoir, power).min(axis=0)
+    ceilings = [math.inf if i == 0 else float(arrival[i]) for i in range(m)]
+
+    def priced(positions: Sequence[NetPosition]) -> float:
+        own = service_costs(space, positions, reservoir, power, speed).min(axis=0)
+        return math.fsum(np.minimum(own, ceilings).tolist())
+
+    done = run(ceilings)
+    assert run([math.inf] * m) == plain  # no ceiling: the plain consolidation, bit for bit
+    assert done.accepted is True and done.gain < 0.0
+    assert done.sample_before == pytest.approx(priced(start) / m, rel=1e-12)
+    assert done.sample_after == pytest.approx(priced(done.positions) / m, rel=1e-12)
+    # the plain fit, improved on the first arrivals (it moves off the other type's place)
+    assert priced(done.positions) < priced(plain.positions)
+    sites = sites_of(space, reservoir, start, start)
+    assert set(done.positions) <= set(sites)
+    costs = np.minimum(service_costs(space, sites, reservoir, power, speed), ceilings)
+    value = priced(done.positions)
+    assert no_swap_improves(costs, [sites.index(x) for x in done.positions], value)
+
+
+@pytest.mark.parametrize(
+    ("ceilings", "stands"), [([0.0], False), ([-1.0] * 20, False), ([math.nan] * 20, False),
+                             ([math.inf] * 20, True)],
+)  # fmt: skip
+def test_ceilings_must_be_one_per_target_non_negative_and_without_stands(
+    space: RoadSpace, ceilings: list[float], stands: bool
+) -> None:
+    _, targets = demand_stream(1, 10)
+    reservoir = duplicated(targets)
+    stand_set = StandSet((NetPosition(3, 0.0), NetPosition(6, 0.0)), (1, 1)) if stands else None
+    with pytest.raises(InvalidInput, match="ceilings"):
+        consolidate(
+            space, poor_start(2), poor_start(2), reservoir, power=1.0, speed=1.0,
+            confidence=0.0, updates=[0, 0], fresh=20, ceilings=ceilings, stands=stand_set,
+        )  # fmt: skip
+
+
 @pytest.mark.parametrize(
     ("floors", "stands"), [([0.0], False), ([-1.0] * 20, False), ([math.nan] * 20, False),
                            ([0.0] * 20, True)],
@@ -815,6 +872,7 @@ def test_policy_round_trip() -> None:
         ConsolidationPolicy(tested_refit=True),
         ConsolidationPolicy(hasten=None),
         ConsolidationPolicy(hasten=4.5),
+        ConsolidationPolicy(shared_targets=False),
     ):
         data = json.loads(json.dumps(policy.to_dict()))
         assert ConsolidationPolicy.from_dict(data) == policy
@@ -831,6 +889,7 @@ def test_policy_round_trip() -> None:
         shift_confidence=0.0,
         unfitted_confidence=0.0,
         hasten=None,
+        shared_targets=False,
     )
     assert ConsolidationPolicy.from_dict({"confidence": 0.5}).settled_confidence == 0.5
     assert ConsolidationPolicy.from_dict({"longest": 300}).slowest == 300
@@ -840,6 +899,7 @@ def test_policy_round_trip() -> None:
         {"refit": "2"},
         {"fresh_baseline": 1},
         {"checked_moves": "yes"},
+        {"shared_targets": 1},
         {"shakes": 2.0},
         {"shakes": True},
         {"slowest": "32000"},
@@ -1563,6 +1623,8 @@ def _hold_keeper(fleet: Fleet[Any], vehicle: int) -> tuple[Learning[Any], int]:
 def test_targets_for_any_vehicle_of_mixed_types_or_speeds_never_consolidate_but_hold(
     space: RoadSpace,
 ) -> None:
+    """Of mixed speeds; or of several types under a policy stored before such targets fed
+    every type (``shared_targets``)."""
     _, stream = demand_stream(10, 600)
     for vehicles, per_type in (
         (
@@ -1571,7 +1633,9 @@ def test_targets_for_any_vehicle_of_mixed_types_or_speeds_never_consolidate_but_
         ),
         ([Vehicle("a"), Vehicle("b"), Vehicle("c", speed=1.5), Vehicle("d", speed=1.5)], False),
     ):
-        fleet = consolidating_fleet(space, vehicles=vehicles)
+        fleet = consolidating_fleet(
+            space, vehicles=vehicles, policy=ConsolidationPolicy(shared_targets=False)
+        )
         assert fleet.learns_per_type is per_type
         window = fleet.config.window
         assert window is not None and window > 0

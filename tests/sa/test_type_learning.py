@@ -18,6 +18,7 @@ from routing_svc.demand.network import hotspot_mixture
 from routing_svc.errors import InvalidInput, ReplayMismatch
 from routing_svc.network import RoadSpace, load_network
 from routing_svc.network.catalogue import resolve_network
+from routing_svc.optimum import expected_cost, solve_demand
 from routing_svc.sa import (
     ROUTING,
     Consolidation,
@@ -29,6 +30,7 @@ from routing_svc.sa import (
     VehicleState,
     learning_config,
 )
+from routing_svc.sa.consolidation import ANY_VEHICLE
 from routing_svc.sa.fleet import can_consolidate, type_groups
 from routing_svc.types import NetPosition
 
@@ -124,17 +126,24 @@ def test_targets_of_one_type_learn_exactly_as_one_fleet_per_type(
         assert list(learning.reservoir) == list(alone[kind].state.learning.reservoir)  # type: ignore[union-attr]
 
 
-def test_a_target_feeds_each_type_it_needs_and_one_for_any_vehicle_none(
-    space: RoadSpace, config: FleetConfig
+@pytest.mark.parametrize("shared", [True, False])
+def test_a_target_feeds_each_type_it_needs_and_one_for_any_vehicle_all_or_none(
+    space: RoadSpace, config: FleetConfig, shared: bool
 ) -> None:
-    fleet = typed_fleet(space, config)
+    """A target for any one vehicle feeds every type (``shared_targets``, the default),
+    kept with :data:`ANY_VEHICLE` as its partners; under a policy stored before, none."""
+    policy = dataclasses.replace(POLICY, shared_targets=shared)
+    fleet = typed_fleet(space, dataclasses.replace(config, consolidation=policy))
     targets = stream(4, 900, mixed=0.4)
     for z, requires in targets:
         fleet.observe(z, requires)
     for kind, learning in fleet.state.type_learning.items():
-        own = [z for z, r in targets if r is not None and kind in r]
+        own = [(z, r) for z, r in targets if (r is None and shared) or (r and kind in r)]
         assert learning.seen == len(own) < len(targets)
-        assert list(learning.reservoir) == own[-POLICY.reservoir :]
+        assert list(learning.reservoir) == [z for z, _ in own][-POLICY.reservoir :]
+        other = [k for k in TYPES if k != kind]
+        partners = [ANY_VEHICLE if r is None else tuple(k for k in other if k in r) for _, r in own]
+        assert list(learning.partners) == partners[-POLICY.reservoir :]
     assert fleet.state.targets == len(targets)
 
 
@@ -155,9 +164,11 @@ def test_a_target_of_several_types_tests_each_at_its_last_arrival(
         assert list(learning.partners) == [tuple(k for k in TYPES if k != kind)]
 
 
-def test_a_consolidation_prices_targets_of_several_types_by_the_other_types_references(
+def test_a_consolidation_prices_targets_by_the_other_types_references(
     space: RoadSpace, config: FleetConfig
 ) -> None:
+    """A target that needed the other type too costs at least its last arrival (floor),
+    one for any vehicle at most the other type's first arrival (ceiling), each by hand."""
     fleet = typed_fleet(space, config)
     fleet.defer_consolidations = True
     targets = stream(12, 400, mixed=0.5)
@@ -165,25 +176,28 @@ def test_a_consolidation_prices_targets_of_several_types_by_the_other_types_refe
     for z, r in targets:
         fleet.observe(z, r)
         job = job or fleet.consolidation_job()
-    assert job is not None and job.key[0] == 0  # type A's (first by name)
-    mine = [(z, r) for z, r in targets if r is not None and "A" in r][: len(job.reservoir)]
+    assert job is not None
+    kind, other = ("A", "B") if job.key[0] == 0 else ("B", "A")
+    mine = [(z, r) for z, r in targets if r is None or kind in r][: len(job.reservoir)]
     assert list(job.reservoir) == [z for z, _ in mine]
-    assert list(job.partners) == [(("B",) if "B" in r else ()) for _, r in mine]
-    assert 0 < sum(map(bool, job.partners)) < len(mine)
-    (kind, references, speed), *rest = job.others
-    assert kind == "B" and not rest and speed == 1.0
-    assert references == tuple(of_type(fleet.positions, "B"))
-    floors = job.floors()
-    assert floors is not None
-    for z, partners, floor in zip(job.reservoir, job.partners, floors, strict=True):
-        if not partners:
-            assert floor == 0.0
-            continue
-        by_hand = min(float(space.cost_matrix([p], [z])[0, 0]) for p in references)
-        assert floor == pytest.approx(ROUTING.cost(by_hand), rel=1e-12)
+    assert list(job.partners) == [
+        ANY_VEHICLE if r is None else ((other,) if other in r else ()) for _, r in mine
+    ]
+    assert {ANY_VEHICLE, (other,), ()} == set(job.partners)
+    (named, references, speed), *rest = job.others
+    assert named == other and not rest and speed == 1.0
+    assert references == tuple(of_type(fleet.positions, other))
+    floors, ceilings = job.floors(), job.ceilings()
+    assert floors is not None and ceilings is not None
+    for z, partners, floor, ceiling in zip(
+        job.reservoir, job.partners, floors, ceilings, strict=True
+    ):
+        by_hand = ROUTING.cost(min(float(space.cost_matrix([p], [z])[0, 0]) for p in references))
+        assert floor == (pytest.approx(by_hand, rel=1e-12) if partners == (other,) else 0.0)
+        assert ceiling == (pytest.approx(by_hand, rel=1e-12) if partners == ANY_VEHICLE else np.inf)
     assert job.solve() == dataclasses.replace(job).solve()  # deterministic
-    only_a = dataclasses.replace(job, partners=tuple(() for _ in job.partners))
-    assert only_a.floors() is None
+    only_mine = dataclasses.replace(job, partners=tuple(() for _ in job.partners))
+    assert only_mine.floors() is None and only_mine.ceilings() is None
 
 
 def test_one_consolidation_a_target_the_other_type_stays_due(
@@ -374,3 +388,26 @@ def test_which_fleets_can_consolidate() -> None:
     assert not can_consolidate(["a", "b"], [1.0, 2.0], stands=True)  # types share stands
     assert not can_consolidate(["a", "a", "b"], [1.0, 2.0, 1.0], stands=False)
     assert type_groups(["b", "a", "b"], [1.0, 1.0, 1.0]) == {"a": (1,), "b": (0, 2)}
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_targets_for_any_vehicle_lead_a_typed_fleet_to_the_p_median_of_all_its_vehicles(
+    space: RoadSpace, config: FleetConfig, seed: int
+) -> None:
+    """Of targets that each need any one vehicle, objective (11) is the p-median of all
+    the fleet's vehicles (one speed): the types learn it together, each fitting what the
+    other's references leave; under a policy stored before, no type learns from them."""
+    demand = hotspot_mixture(NET, centres=3, rng=np.random.default_rng(100 + seed))
+    n = sum(TYPES.values())
+    optimum = solve_demand(space, demand, n).objective
+    targets = demand.sample(np.random.default_rng(seed), 1500)
+    gaps = {}
+    for shared in (True, False):
+        policy = dataclasses.replace(POLICY, shared_targets=shared)
+        fleet = typed_fleet(space, dataclasses.replace(config, consolidation=policy))
+        for z in targets:
+            fleet.observe(z, None)
+        value = expected_cost(space, list(fleet.state.positions), np.ones(n), demand)
+        gaps[shared] = value / optimum - 1.0
+    assert gaps[True] < 0.03
+    assert gaps[False] > 0.5  # the start, about where it was
