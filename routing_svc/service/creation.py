@@ -16,9 +16,11 @@ from typing import Any
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.errors import InvalidInput, RoutingSvcError
+from routing_svc.network import RoadSpace
 from routing_svc.network.stands import Stand, stands_on_network
 from routing_svc.optimum.stands import solve_stands
 from routing_svc.sa import Annealing, Objective, learning_config, prior_counts
+from routing_svc.sa.consolidation import ANY_VEHICLE, ConsolidationJob, ConsolidationPolicy
 from routing_svc.sa.fleet import type_groups
 from routing_svc.sa.requirements import build_requirement
 from routing_svc.sa.schedules import Counting, schedule_from_dict
@@ -34,6 +36,10 @@ from routing_svc.service.reference import (
 from routing_svc.service.schemas import FleetSpec, StandSpec, VehicleSpec
 from routing_svc.types import NetPosition
 
+StartGroup = tuple[list[VehicleSpec], list[NetPosition], list[tuple[str, ...]]]
+"""Vehicles that start together, the sample targets they start at the optimum of, and
+per target the other types it needed (:attr:`routing_svc.sa.Learning.partners`)."""
+
 
 def start_groups(
     ordered: list[VehicleSpec],
@@ -41,7 +47,7 @@ def start_groups(
     requires: Sequence[Sequence[str] | None] | None,
     *,
     per_type: bool,
-) -> list[tuple[list[VehicleSpec], list[NetPosition]]]:
+) -> list[StartGroup]:
     """The vehicles (in id order) that start together at the optimum of a sample, each
     group with the sample's targets it starts at the optimum of.
 
@@ -50,25 +56,67 @@ def start_groups(
     vehicle of a type, the optimum of objective (11) is each type's p-median of the
     targets that needed it (where such a fleet's consolidations lead,
     :attr:`routing_svc.sa.Fleet.learns_per_type`). A type's targets are those whose
-    ``requires`` name it and those that needed any one vehicle (all of them when
-    ``requires`` is ``None``); a type no target needed takes the whole sample. Else
-    the whole fleet at the p-median of the whole sample, which serves targets that
-    need any one vehicle.
+    ``requires`` name it and those that needed any one vehicle (all of them, with no
+    partners, when ``requires`` is ``None``); a type no target needed takes the whole
+    sample. Else the whole fleet at the p-median of the whole sample, which serves
+    targets that need any one vehicle.
     """
     groups = type_groups([v.type for v in ordered], [v.speed for v in ordered])
     if not per_type or groups is None or len(groups) == 1:
-        return [(ordered, sample)]
-    out = []
+        return [(ordered, sample, [() for _ in sample])]
+    out: list[StartGroup] = []
     for kind, members in groups.items():
-        own = (
-            sample
-            if requires is None
-            else [
-                z for z, needs in zip(sample, requires, strict=True) if not needs or kind in needs
-            ]
-        )
-        out.append(([ordered[i] for i in members], own or sample))
+        own = [
+            (z, _partners(kind, needs))
+            for z, needs in zip(sample, requires or [None] * len(sample), strict=True)
+            if requires is None or not needs or kind in needs
+        ]
+        if requires is None:
+            own = [(z, ()) for z, _ in own]
+        if not own:
+            own = [(z, ()) for z in sample]
+        out.append(([ordered[i] for i in members], [z for z, _ in own], [k for _, k in own]))
     return out
+
+
+def _partners(kind: str, needs: Sequence[str] | None) -> tuple[str, ...]:
+    """The other types a target of ``kind`` needed (:data:`ANY_VEHICLE` for any one)."""
+    if not needs:
+        return ANY_VEHICLE
+    return tuple(sorted({k for k in needs if k != kind}))
+
+
+def fitted_together(
+    space: RoadSpace,
+    groups: list[StartGroup],
+    starts: dict[str, NetPosition],
+    *,
+    power: float,
+) -> None:
+    """Refit, in order, each type whose sample targets needed other types or any one
+    vehicle, where a consolidation of its sample would put it with the other types
+    standing at their ``starts`` (objective (11) with them fixed:
+    :meth:`routing_svc.sa.ConsolidationJob.solve`, a refit taken untested); ``starts``
+    is updated in place."""
+    policy = ConsolidationPolicy()
+    for group, own, partners in groups:
+        if not any(partners):
+            continue
+        others = tuple(
+            (g[0].type, tuple(starts[v.id] for v in g), float(g[0].speed))
+            for g, _, _ in groups
+            if g is not group
+        )
+        job = ConsolidationJob(
+            key=(0, 0, 0), apply_by=0, space=space,
+            positions=tuple(starts[v.id] for v in group),
+            anchor=tuple(starts[v.id] for v in group), reservoir=tuple(own),
+            power=power, speed=float(group[0].speed), confidence=policy.confidence,
+            updates=tuple(0 for _ in group), fresh=len(own), folds=policy.folds,
+            refit=True, tested_refit=False, stands=None, shakes=policy.shakes,
+            partners=tuple(partners), others=others,
+        )  # fmt: skip
+        starts.update({v.id: p for v, p in zip(group, job.solve().positions, strict=True)})
 
 
 def check_sample_requires(
@@ -111,7 +159,7 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
         ordered = sorted(spec.vehicles, key=lambda v: v.id)
         starts, served = {}, {}
         groups = start_groups(ordered, sample, optimum_start.requires, per_type=stands is None)
-        for group, own in groups:
+        for group, own, _ in groups:
             prior = DemandDistribution.of_targets("prior-sample", own)
             if stands is None:
                 positions, _ = solve_reference(
@@ -124,6 +172,9 @@ def build_created_payload(spec: FleetSpec, entry: NetworkEntry) -> dict[str, Any
             # deterministic pairing: vehicles in id order take the sites in edge order
             positions.sort()
             starts.update({v.id: p for v, p in zip(group, positions, strict=True)})
+        if len(groups) > 1:
+            fitted_together(space, groups, starts, power=objective.power)
+        for group, own, _ in groups:
             group_counts = prior_counts(
                 space, [starts[v.id] for v in group], [v.speed for v in group], own
             )

@@ -309,8 +309,9 @@ def test_targets_for_any_vehicle_count_for_every_type_of_an_optimum_start(
     fleet = _two_a_and_one_b_at_the_optimum_of(client, sample, requires)
     at = {v["id"]: v["position"] for v in fleet["vehicles"]}
     assert {at["a1"]["edge"], at["a2"]["edge"]} == {edge(10), edge(300)}
-    # the one B at the 1-median of its targets and the three for anyone: against every
-    # edge's start and every target point (a 1-median of points lies on one of them)
+    # the three for anyone count for both types: A on them and its own; the one B then
+    # fits the rest, its own targets (the 1-median of its targets and the three for
+    # anyone, against every edge's start and every target point: here the same place)
     own = b_targets + anyone
     points = [NetPosition(NET.edge_index[t["edge"]], 0.0) for t in own]
     candidates = [NetPosition(e, 0.0) for e in range(NET.n_edges)]
@@ -320,6 +321,19 @@ def test_targets_for_any_vehicle_count_for_every_type_of_an_optimum_start(
     steps = client.get("/v1/fleets/f1/metrics").json()["step_size"]
     _steps_match_counts(steps, fleet, ["a1", "a2"], a_targets + anyone)
     _steps_match_counts(steps, fleet, ["b1"], own)
+
+
+def test_types_of_a_sample_for_any_vehicle_start_on_different_places(
+    client: TestClient,
+) -> None:
+    places = [edge(10), edge(200), edge(400)]
+    sample: list[dict[str, Any]] = [{"edge": e, "offset": 0.0} for e in places for _ in range(4)]
+    # every target for any one vehicle: objective (11) is the 3-median of all three
+    # vehicles, 0 with one on each place; each type at the p-median of the whole sample
+    # would put the one B on a place of the two A's
+    fleet = _two_a_and_one_b_at_the_optimum_of(client, sample, [None] * len(sample))
+    at = {v["id"]: (v["position"]["edge"], v["position"]["offset"]) for v in fleet["vehicles"]}
+    assert sorted(at.values()) == sorted((e, 0.0) for e in places)
 
 
 @pytest.mark.parametrize(
