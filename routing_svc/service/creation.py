@@ -100,7 +100,7 @@ def fitted_together(
     is updated in place."""
     policy = ConsolidationPolicy()
     for group, own, partners in groups:
-        if not any(partners):
+        if not any(partners) or len(own) < 2:  # nothing to price, or no sample to fit
             continue
         others = tuple(
             (g[0].type, tuple(starts[v.id] for v in g), float(g[0].speed))

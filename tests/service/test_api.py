@@ -334,6 +334,19 @@ def test_types_of_a_sample_for_any_vehicle_start_on_different_places(
     fleet = _two_a_and_one_b_at_the_optimum_of(client, sample, [None] * len(sample))
     at = {v["id"]: (v["position"]["edge"], v["position"]["offset"]) for v in fleet["vehicles"]}
     assert sorted(at.values()) == sorted((e, 0.0) for e in places)
+    # a sample of one target for anyone: every vehicle on it (nothing to refit)
+    one = client.post(
+        "/v1/fleets",
+        json=fleet_body(
+            "one",
+            vehicles=[{"id": "a1", "type": "A"}, {"id": "b1", "type": "B"}],
+            start={"optimum": {"sample": sample[:1], "requires": [None]}},
+        ),
+    )
+    assert one.status_code == 201, one.text
+    assert {(v["position"]["edge"], v["position"]["offset"]) for v in one.json()["vehicles"]} == {
+        (places[0], 0.0)
+    }
 
 
 @pytest.mark.parametrize(
