@@ -326,36 +326,31 @@ def test_targets_for_any_vehicle_are_priced_by_the_first_arrival(
 
 
 @pytest.mark.parametrize(
-    ("ceilings", "stands"), [([0.0], False), ([-1.0] * 20, False), ([math.nan] * 20, False),
-                             ([math.inf] * 20, True)],
-)  # fmt: skip
-def test_ceilings_must_be_one_per_target_non_negative_and_without_stands(
-    space: RoadSpace, ceilings: list[float], stands: bool
+    ("name", "values", "stands"),
+    [
+        ("floors", [0.0], False),
+        ("floors", [-1.0] * 20, False),
+        ("floors", [math.nan] * 20, False),
+        ("floors", [math.inf] * 20, False),
+        ("floors", [0.0] * 20, True),
+        ("ceilings", [0.0], False),
+        ("ceilings", [-1.0] * 20, False),
+        ("ceilings", [math.nan] * 20, False),
+        ("ceilings", [math.inf] * 20, True),
+    ],
+)
+def test_prices_must_be_one_per_target_non_negative_and_without_stands(
+    space: RoadSpace, name: str, values: list[float], stands: bool
 ) -> None:
+    """Floors must also be finite; a ceiling may be ``inf`` (none)."""
     _, targets = demand_stream(1, 10)
     reservoir = duplicated(targets)
     stand_set = StandSet((NetPosition(3, 0.0), NetPosition(6, 0.0)), (1, 1)) if stands else None
-    with pytest.raises(InvalidInput, match="ceilings"):
+    prices: dict[str, Any] = {name: values}
+    with pytest.raises(InvalidInput, match=name):
         consolidate(
             space, poor_start(2), poor_start(2), reservoir, power=1.0, speed=1.0,
-            confidence=0.0, updates=[0, 0], fresh=20, ceilings=ceilings, stands=stand_set,
-        )  # fmt: skip
-
-
-@pytest.mark.parametrize(
-    ("floors", "stands"), [([0.0], False), ([-1.0] * 20, False), ([math.nan] * 20, False),
-                           ([0.0] * 20, True)],
-)  # fmt: skip
-def test_floors_must_be_one_per_target_finite_non_negative_and_without_stands(
-    space: RoadSpace, floors: list[float], stands: bool
-) -> None:
-    _, targets = demand_stream(1, 10)
-    reservoir = duplicated(targets)
-    stand_set = StandSet((NetPosition(3, 0.0), NetPosition(6, 0.0)), (1, 1)) if stands else None
-    with pytest.raises(InvalidInput, match="floors"):
-        consolidate(
-            space, poor_start(2), poor_start(2), reservoir, power=1.0, speed=1.0,
-            confidence=0.0, updates=[0, 0], fresh=20, floors=floors, stands=stand_set,
+            confidence=0.0, updates=[0, 0], fresh=20, stands=stand_set, **prices,
         )  # fmt: skip
 
 
