@@ -248,6 +248,36 @@ def test_consolidation_against_brute_force(
     assert done.baseline == done.sample_before + done.gain
 
 
+def assert_a_priced_fit(
+    space: RoadSpace,
+    done: Consolidation[NetPosition],
+    plain: Consolidation[NetPosition],
+    reservoir: list[NetPosition],
+    start: list[NetPosition],
+    price: Callable[[FloatArray], FloatArray],
+    power: float,
+    speed: float,
+) -> None:
+    """``done`` was taken, its costs before and after are the sample's on the prices
+    (``price`` of the costs from the closest reference), it is strictly better there than
+    the ``plain`` fit, and no swap of a reference for another candidate lowers them."""
+    m = len(reservoir)
+
+    def priced(positions: Sequence[NetPosition]) -> float:
+        own = service_costs(space, positions, reservoir, power, speed).min(axis=0)
+        return math.fsum(price(own).tolist())
+
+    assert done.accepted is True and done.gain < 0.0
+    assert done.sample_before == pytest.approx(priced(start) / m, rel=1e-12)
+    assert done.sample_after == pytest.approx(priced(done.positions) / m, rel=1e-12)
+    assert priced(done.positions) < priced(plain.positions)
+    sites = sites_of(space, reservoir, start, start)
+    assert set(done.positions) <= set(sites)
+    costs = price(service_costs(space, sites, reservoir, power, speed))
+    value = priced(done.positions)
+    assert no_swap_improves(costs, [sites.index(x) for x in done.positions], value)
+
+
 @pytest.mark.parametrize(("p", "power", "speed"), [(2, 1.0, 1.0), (3, 1.0, 1.0), (2, 2.0, 2.5)])
 def test_targets_of_several_types_are_priced_by_their_last_arrival(
     space: RoadSpace, p: int, power: float, speed: float
@@ -266,23 +296,11 @@ def test_targets_of_several_types_are_priced_by_their_last_arrival(
             updates=[7] * p, fresh=m, floors=floors,
         )  # fmt: skip
 
-    def priced(positions: Sequence[NetPosition]) -> float:
-        own = service_costs(space, positions, reservoir, power, speed).min(axis=0)
-        return math.fsum(np.maximum(own, floors).tolist())
-
     plain, done = run(None), run(floors)
     assert run([0.0] * m) == plain  # no floor: the plain consolidation, bit for bit
-    assert done.accepted is True and done.gain < 0.0
-    assert done.sample_before == pytest.approx(priced(start) / m, rel=1e-12)
-    assert done.sample_after == pytest.approx(priced(done.positions) / m, rel=1e-12)
-    # the plain fit, improved on the last arrivals (here it moves)
-    assert priced(done.positions) < priced(plain.positions)
-    # and no swap of a reference for another candidate lowers the last arrivals' sum
-    sites = sites_of(space, reservoir, start, start)
-    assert set(done.positions) <= set(sites)
-    costs = np.maximum(service_costs(space, sites, reservoir, power, speed), floors)
-    value = priced(done.positions)
-    assert no_swap_improves(costs, [sites.index(x) for x in done.positions], value)
+    assert_a_priced_fit(
+        space, done, plain, reservoir, start, lambda c: np.maximum(c, floors), power, speed
+    )
 
 
 @pytest.mark.parametrize(("p", "power", "speed"), [(2, 1.0, 1.0), (3, 1.0, 1.0), (2, 2.0, 0.8)])
@@ -307,22 +325,12 @@ def test_targets_for_any_vehicle_are_priced_by_the_first_arrival(
     arrival = service_costs(space, [other], reservoir, power).min(axis=0)
     ceilings = [math.inf if i == 0 else float(arrival[i]) for i in range(m)]
 
-    def priced(positions: Sequence[NetPosition]) -> float:
-        own = service_costs(space, positions, reservoir, power, speed).min(axis=0)
-        return math.fsum(np.minimum(own, ceilings).tolist())
-
     done = run(ceilings)
     assert run([math.inf] * m) == plain  # no ceiling: the plain consolidation, bit for bit
-    assert done.accepted is True and done.gain < 0.0
-    assert done.sample_before == pytest.approx(priced(start) / m, rel=1e-12)
-    assert done.sample_after == pytest.approx(priced(done.positions) / m, rel=1e-12)
-    # the plain fit, improved on the first arrivals (it moves off the other type's place)
-    assert priced(done.positions) < priced(plain.positions)
-    sites = sites_of(space, reservoir, start, start)
-    assert set(done.positions) <= set(sites)
-    costs = np.minimum(service_costs(space, sites, reservoir, power, speed), ceilings)
-    value = priced(done.positions)
-    assert no_swap_improves(costs, [sites.index(x) for x in done.positions], value)
+    # it moves off the other type's place
+    assert_a_priced_fit(
+        space, done, plain, reservoir, start, lambda c: np.minimum(c, ceilings), power, speed
+    )
 
 
 @pytest.mark.parametrize(
