@@ -34,35 +34,25 @@ def _thinned(order: npt.NDArray[np.int64]) -> list[int]:
     return [int(i) for i in order.tolist()]
 
 
-def history_sample(table: CallTable, placed: PlacedCalls | None) -> list[dict[str, Any]]:
+def history_sample(
+    table: CallTable, placed: PlacedCalls | None
+) -> tuple[list[dict[str, Any]], list[list[str] | None] | None]:
     """Positions of the calls in time order, at most :data:`MAX_SAMPLE`, evenly spaced:
     the checked ``(edge, offset)`` positions, or without ``placed`` the places as the
-    file gives them (the service then resolves them, and refuses a bad one)."""
+    file gives them (the service then resolves them, and refuses a bad one); and the
+    types each of them needed (``None`` for any one vehicle), ``None`` when no call
+    names types."""
     if placed is None:
-        return [table.place(i) for i in _sample_rows(table, None)]
-    return [
-        {"edge": placed.edges[i], "offset": placed.offsets[i]}
-        for i in _thinned(time_order(table, placed))
-    ]
-
-
-def history_sample_requires(
-    table: CallTable, placed: PlacedCalls | None
-) -> list[list[str] | None] | None:
-    """The types each call of :func:`history_sample` needed, in the same order (``None``
-    for a call that needed any one vehicle); ``None`` when no call names types."""
-    rows = _sample_rows(table, placed)
+        rows = _thinned(np.argsort(table.seconds, kind="stable").astype(np.int64))
+        positions = [table.place(i) for i in rows]
+    else:
+        kept = _thinned(time_order(table, placed))
+        positions = [{"edge": placed.edges[i], "offset": placed.offsets[i]} for i in kept]
+        rows = [int(placed.rows[i]) for i in kept]
     needs = [table.requires[r] for r in rows]
     if all(n is None for n in needs):
-        return None
-    return [None if n is None else list(n) for n in needs]
-
-
-def _sample_rows(table: CallTable, placed: PlacedCalls | None) -> list[int]:
-    """The table rows of :func:`history_sample`, in its order."""
-    if placed is None:
-        return _thinned(np.argsort(table.seconds, kind="stable").astype(np.int64))
-    return [int(placed.rows[i]) for i in _thinned(time_order(table, placed))]
+        return positions, None
+    return positions, [None if n is None else list(n) for n in needs]
 
 
 VehicleMix = int | Mapping[str, int]
@@ -127,8 +117,8 @@ def history_fleet_spec(
     """The ``POST /v1/fleets`` body of a fleet at the history's optimum: ``vehicles``
     identical ones at its p-median, or of several types, each type at the optimum of the
     calls that needed it (``start.optimum.requires``: the calls' types)."""
-    optimum: dict[str, Any] = {"sample": history_sample(table, placed)}
-    requires = history_sample_requires(table, placed)
+    sample, requires = history_sample(table, placed)
+    optimum: dict[str, Any] = {"sample": sample}
     if requires is not None:
         optimum["requires"] = requires
     return {

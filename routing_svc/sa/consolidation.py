@@ -551,22 +551,14 @@ def consolidate(
         raise InvalidInput("ceilings need one value per reservoir target, and no stands")
     if ceilings is not None and not all(u >= 0.0 for u in ceilings):  # NaN fails too
         raise InvalidInput("ceilings must be >= 0 (inf: none)")
-    floored = floors is not None and any(f > 0.0 for f in floors)
-    capped = ceilings is not None and any(math.isfinite(u) for u in ceilings)
-    priced = floored or capped
-    entries: list[Any] = (
-        list(
-            zip(
-                reservoir,
-                floors if floors is not None and floored else [0.0] * len(reservoir),
-                ceilings if ceilings is not None and capped else [math.inf] * len(reservoir),
-                strict=True,
-            )
-        )
-        if priced
-        else [*reservoir]
-    )
-    keys = list(dict.fromkeys(entries))  # a column per target, and per price when priced
+    low = list(floors) if floors is not None and any(f > 0.0 for f in floors) else None
+    high = list(ceilings) if ceilings is not None and any(map(math.isfinite, ceilings)) else None
+    priced = low is not None or high is not None
+    entries: list[Any] = [*reservoir]
+    if priced:  # a column per target and price: (target, floor, ceiling)
+        m = len(reservoir)
+        entries = list(zip(reservoir, low or [0.0] * m, high or [math.inf] * m, strict=True))
+    keys = list(dict.fromkeys(entries))
     targets = [z for z, _, _ in keys] if priced else keys
     column = {z: j for j, z in enumerate(keys)}
     places = np.fromiter((column[z] for z in entries), dtype=np.int64, count=len(reservoir))
@@ -668,6 +660,15 @@ def consolidate(
 ANY_VEHICLE: tuple[str, ...] = ("",)
 """The partners kept for a target that needed any one vehicle (no type is named ``""``):
 the first arrival of every type serves it (:meth:`ConsolidationJob.ceilings`)."""
+
+
+def partners_of(kind: str, requires: Sequence[str] | None) -> tuple[str, ...]:
+    """What a type's reservoir keeps of a target's needs (:attr:`Learning.partners`): the
+    other types it needed, in name order, or :data:`ANY_VEHICLE` for any one vehicle."""
+    if not requires:
+        return ANY_VEHICLE
+    return tuple(sorted({k for k in requires if k != kind}))
+
 
 ConsolidationKey = tuple[int, int, int]
 """Which due consolidation a job is for: the first vehicle of the group it moves (0 for

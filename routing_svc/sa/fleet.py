@@ -47,7 +47,6 @@ import numpy as np
 from routing_svc.errors import Conflict, InvalidInput, NotFound, ReplayMismatch
 from routing_svc.sa.annealing import Annealing
 from routing_svc.sa.consolidation import (
-    ANY_VEHICLE,
     NO_SHIFT_RUN,
     Consolidation,
     ConsolidationJob,
@@ -56,6 +55,7 @@ from routing_svc.sa.consolidation import (
     SampleSpace,
     ShiftRun,
     move_pays,
+    partners_of,
 )
 from routing_svc.sa.held_step import Hold, JunctionSpace, held_step
 from routing_svc.sa.live import (
@@ -826,10 +826,13 @@ class Fleet(Generic[P]):
             policy = self.config.consolidation
             if policy is None or not policy.shared_targets:
                 return []
-            return [(learning, cost, ANY_VEHICLE) for learning in self.state.type_learning.values()]
-        kinds = sorted(set(requires))
+            return [
+                (learning, cost, partners_of(kind, None))
+                for kind, learning in self.state.type_learning.items()
+            ]
         return [
-            (self.state.type_learning[k], cost, tuple(o for o in kinds if o != k)) for k in kinds
+            (self.state.type_learning[k], cost, partners_of(k, requires))
+            for k in sorted(set(requires))
         ]
 
     def _learning_of(self, vehicle: int) -> tuple[Learning[P], int]:

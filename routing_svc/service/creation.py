@@ -20,7 +20,7 @@ from routing_svc.network import RoadSpace
 from routing_svc.network.stands import Stand, stands_on_network
 from routing_svc.optimum.stands import solve_stands
 from routing_svc.sa import Annealing, Objective, learning_config, prior_counts
-from routing_svc.sa.consolidation import ANY_VEHICLE, ConsolidationJob, ConsolidationPolicy
+from routing_svc.sa.consolidation import ConsolidationJob, ConsolidationPolicy, partners_of
 from routing_svc.sa.fleet import type_groups
 from routing_svc.sa.requirements import build_requirement
 from routing_svc.sa.schedules import Counting, schedule_from_dict
@@ -66,24 +66,19 @@ def start_groups(
         return [(ordered, sample, [() for _ in sample])]
     out: list[StartGroup] = []
     for kind, members in groups.items():
-        own = [
-            (z, _partners(kind, needs))
-            for z, needs in zip(sample, requires or [None] * len(sample), strict=True)
-            if requires is None or not needs or kind in needs
-        ]
-        if requires is None:
-            own = [(z, ()) for z, _ in own]
-        if not own:
+        own = (
+            [
+                (z, partners_of(kind, needs))
+                for z, needs in zip(sample, requires, strict=True)
+                if not needs or kind in needs
+            ]
+            if requires is not None
+            else []
+        )
+        if not own:  # no requires, or none for this type: the whole sample, unpriced
             own = [(z, ()) for z in sample]
         out.append(([ordered[i] for i in members], [z for z, _ in own], [k for _, k in own]))
     return out
-
-
-def _partners(kind: str, needs: Sequence[str] | None) -> tuple[str, ...]:
-    """The other types a target of ``kind`` needed (:data:`ANY_VEHICLE` for any one)."""
-    if not needs:
-        return ANY_VEHICLE
-    return tuple(sorted({k for k in needs if k != kind}))
 
 
 def fitted_together(

@@ -104,7 +104,8 @@ class OptimumStart(Strict):
                 description="Per sample position, the types its target needed (as a "
                 "target's 'requires'; null or [] for any one vehicle). A fleet whose types "
                 "each start apart starts each type at the optimum of the targets that "
-                "needed it and of those that needed any one vehicle.",
+                "needed it and of those that needed any one vehicle, refitted with the "
+                "other types fixed where targets needed several types or any one.",
             ),
         ]
         | None
