@@ -1,6 +1,7 @@
-"""What the learning benchmarks share: their networks, refusing an unknown network or
-demand before any work, the medians over seeds and their worst case, and the report's
-last two keys (its records and the seconds it took)."""
+"""What the benchmarks share: the folder of the shared networks; for the learning
+benchmarks, their networks, refusing an unknown network or demand before any work, the
+medians over seeds and their worst case, and the report's last two keys (its records and
+the seconds it took)."""
 
 from __future__ import annotations
 

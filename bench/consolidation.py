@@ -33,6 +33,7 @@ from typing import Any
 from unittest import mock
 
 import numpy as np
+from bench_shared import SHARED
 
 import routing_svc.sa.consolidation as consolidation
 from routing_svc.demand.network import hotspot_mixture
@@ -42,7 +43,6 @@ from routing_svc.sa.consolidation import Consolidation, ConsolidationPolicy, con
 from routing_svc.types import FloatArray, NetPosition
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared" / "nets"
 NETWORKS = {"drt": "drt", "badhersfeld": str(SHARED / "badhersfeld.net.xml.gz")}
 
 

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from bench_shared import SHARED
 
 from routing_svc.json_text import json_text
 from routing_svc.sim import CosimResult, CosimSpec, PolicyRun, parse_policies, run_cosim
@@ -43,7 +44,6 @@ from routing_svc.sim.plots import FIGURE_KINDS, figure_path, write_figures
 from routing_svc.sim.spec import DEFAULT_INCIDENT_SAMPLE
 
 ROOT = Path(__file__).resolve().parent.parent
-SHARED = ROOT.parent / "shared" / "nets"
 BADHERSFELD = SHARED / "badhersfeld.net.xml.gz"
 BUILDINGS = SHARED / "badhersfeld.buildings.csv"
 FIGURES = ROOT / "docs" / "figures" / "cosim"

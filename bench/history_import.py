@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bench_shared import SHARED
 
 from routing_svc.history import (
     InProcessHistoryClient,
@@ -40,13 +41,11 @@ from routing_svc.history import (
 from routing_svc.history.command import SERVER_CONSOLIDATION_WORKERS
 from routing_svc.long_lived import frozen_heap
 
-ROOT = Path(__file__).resolve().parent.parent
-NETS = ROOT.parent / "shared" / "nets"
 BASELINE_BATCH = 50
 
 
 def write_history(path: Path, n: int, *, lengths: dict[str, float], seed: int) -> None:
-    with (NETS / "badhersfeld.buildings.csv").open() as f:
+    with (SHARED / "badhersfeld.buildings.csv").open() as f:
         rows = [(r["GenEdge"], float(r["Weight"])) for r in csv.DictReader(f)]
     rows = [(e, w) for e, w in rows if e in lengths]
     weights = np.array([w for _, w in rows])
@@ -76,7 +75,7 @@ def main() -> None:
             database_url=f"sqlite:///{folder / 'e.db'}",
             consolidation_workers=args.consolidation_workers,
         ) as client:
-            client.add_network(NETS / "badhersfeld.net.xml.gz", name="bh")
+            client.add_network(SHARED / "badhersfeld.net.xml.gz", name="bh")
             entry = client.service.network("bh")
             net = entry.network
             lengths = {e: float(net.length[i]) for i, e in enumerate(net.edge_ids)}

@@ -41,12 +41,12 @@ from pathlib import Path
 from typing import Any
 
 import sumo
+from bench_shared import SHARED
 
 from routing_svc.errors import RoutingSvcError, XmlLimitExceeded
 from routing_svc.network.safe_xml import check_net_xml_file, read_net_bytes
 
 REPO = Path(__file__).resolve().parent.parent
-SHARED = REPO.parent / "shared" / "nets"
 SUMO_HOME = Path(sumo.SUMO_HOME)
 MIB = 1 << 20
 UPLOAD_LIMIT = 64 * MIB

@@ -56,10 +56,11 @@ from typing import Any
 
 import httpx
 import numpy as np
+from bench_shared import SHARED
 
 ROOT = Path(__file__).resolve().parent.parent
 RUN = uuid.uuid4().hex[:6]  # suffix of this run's fleet ids
-BADHERSFELD = ROOT.parent / "shared" / "nets" / "badhersfeld.net.xml.gz"
+BADHERSFELD = SHARED / "badhersfeld.net.xml.gz"
 
 TRIVIAL_APP = """
 from fastapi import FastAPI

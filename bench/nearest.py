@@ -48,6 +48,7 @@ from typing import Any
 import networkx as nx
 import numpy as np
 import sumo
+from bench_shared import SHARED
 
 from routing_svc.network import CompiledNetwork, RoadSpace, default_cache_dir, load_network
 from routing_svc.network.search import search_arcs
@@ -324,7 +325,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--badhersfeld",
         type=Path,
-        default=REPO.parent / "shared" / "nets" / "badhersfeld.net.xml.gz",
+        default=SHARED / "badhersfeld.net.xml.gz",
     )
     parser.add_argument(
         "--cache-dir", type=Path, default=None, help="compiled networks and the generated grid"

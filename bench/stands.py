@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from bench_shared import SHARED
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.demand.spec import network_demand, parse_demand_spec
@@ -42,7 +43,6 @@ from routing_svc.sa import Fleet, Objective, Vehicle, learning_config
 from routing_svc.sa.stands import StandSet
 from routing_svc.types import NetPosition
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "nets"
 DEMANDS = ("hotspots:3", f"buildings:{SHARED / 'badhersfeld.buildings.csv'}")
 CHECKPOINTS = (3000, 10000)
 STAND_TIME_LIMIT = 300.0

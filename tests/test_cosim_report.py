@@ -31,6 +31,8 @@ def test_render_only_without_finished_runs_writes_nothing(tmp_path: Path) -> Non
 
 
 def _report_module() -> Any:
+    if str(ROOT / "bench") not in sys.path:  # as when it runs as a script
+        sys.path.insert(0, str(ROOT / "bench"))
     spec = importlib.util.spec_from_file_location(
         "cosim_report", ROOT / "bench" / "cosim_report.py"
     )
