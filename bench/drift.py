@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 from bench_shared import NETWORKS, finished, network_name, refuse_unknown
-from learning import gap, instance
+from learning import gap, instance, refuse_degenerate
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.demand import network as network_demand
@@ -77,6 +77,7 @@ def job(args: Job) -> dict[str, Any]:
     net, n, seed, settle, drift, hold = args
     t0 = time.perf_counter()
     inst = instance(net, n, seed)
+    refuse_degenerate(inst, net, n)
     space, network = inst.space, inst.space.network
     start, end = centres(network, [seed, 0]), centres(network, [seed, 2])
     for at, demand in ((start, inst.demand), (end, inst.shifted)):

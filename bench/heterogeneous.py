@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 from bench_shared import NETWORKS, finished, network_name, refuse_unknown
-from learning import DEFAULT_DEMAND, Instance, instance, rest_run, wire
+from learning import DEFAULT_DEMAND, Instance, instance, refuse_degenerate, rest_run, wire
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.optimum import solve_demand
@@ -126,6 +126,7 @@ class Setting:
 def setting(net: str, n: int, seed: int, targets: int, mix_name: str, demand: str) -> Setting:
     mix = MIXES[mix_name]
     inst = instance(net, n, seed, demand, shift=False)
+    refuse_degenerate(inst, net, n)
     types = [TYPES[0]] * (n // 2) + [TYPES[1]] * (n - n // 2)
     speeds = np.ones(n)
     at_optimum, optimum = optimum_of(inst, types, speeds, mix)

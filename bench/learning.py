@@ -19,7 +19,11 @@ every fleet before (the named baseline). Medians over seeds; the worst network
 counts. The distance behind the batch answer is given two ways: the median gap
 less the batch answer's median gap (``behind_anchor_from_1000``), and the median
 over seeds of each seed's gap less the batch answer of its own targets
-(``behind_anchor_paired_from_1000``). ``--rest`` adds one curve through the REST API of a live
+(``behind_anchor_paired_from_1000``). An instance without an optimum to compare with
+(more vehicles than the network has candidate sites) or whose optimum costs under
+:data:`DEGENERATE_FRACTION` of one vehicle's (more vehicles than the demand has
+places) is not measured: its record says why, and the summary lists it under
+``not_measured``. ``--rest`` adds one curve through the REST API of a live
 ``routing-svc serve`` (``targets:batch``).
 
 Run: ``python bench/learning.py`` (everything; long) or, e.g.,
@@ -65,6 +69,8 @@ from routing_svc.types import FloatArray, NetPosition
 DEFAULT_DEMAND = "hotspots:3"
 CHECKPOINTS = (300, 1000, 3000, 10000, 30000)
 SHIFT_AT = 10000
+DEGENERATE_FRACTION = 0.005
+"""An instance whose optimum costs less than this fraction of one vehicle's is not measured."""
 AFTER_SHIFT = (1000, 5000)
 GOALS: dict[str, Any] = {
     "cold": {"3000": 0.05, "30000": 0.02},
@@ -119,11 +125,6 @@ def instance(
         recipe = DemandRecipe(Hotspots(recipe.form.count, metres), recipe.profile)
     demand = network_demand(network, recipe, rng=np.random.default_rng([seed, 0]))
     optimum, matrix, sites = optimum_of(space, demand, n)
-    if optimum[0] == 0.0:
-        raise InvalidInput(
-            f"{net.partition('=')[0]}/{n}: the optimum costs 0 (the vehicles can stand on "
-            "every demand atom): there is no relative gap to measure"
-        )
     if shift and isinstance(recipe.form, Hotspots):  # the hotspots move: new centres
         shifted = network_demand(network, recipe, rng=np.random.default_rng([seed, 2]))
         shifted_optimum, shifted_matrix, shifted_sites = optimum_of(space, shifted, n)
@@ -150,7 +151,7 @@ def instance(
 def gap(space: RoadSpace, positions: list[NetPosition], demand: Any, optimum: float) -> float:
     value = expected_cost(space, positions, np.ones(len(positions)), demand)
     relative = relative_gap(value, optimum)
-    assert relative is not None  # instance() refuses an optimum of 0
+    assert relative is not None  # a degenerate instance (an optimum of 0) is not measured
     return relative
 
 
@@ -266,10 +267,35 @@ def anchor_gaps(inst: Instance, n: int, seed: int, targets: int) -> dict[str, di
 Job = tuple[str, int, int, tuple[str, ...], tuple[str, ...], int, str, float | None, CostKind]
 
 
+def degenerate(inst: Instance, n: int) -> str | None:
+    """Why relative gaps of ``inst`` would mean nothing, or ``None``.
+
+    That is when its optimum costs 0 or less than :data:`DEGENERATE_FRACTION` of the
+    optimum of one vehicle: ``n`` vehicles stand on (nearly) every demand atom, so that
+    a fraction of a metre a target reads as a gap of many per cent.
+    """
+    one = solve_demand(inst.space, inst.demand, 1).objective
+    if inst.optimum[0] > 0.0 and inst.optimum[0] >= DEGENERATE_FRACTION * one:
+        return None
+    return (
+        f"the optimum of {n} vehicles ({inst.optimum[0]:.3g} a target) is under "
+        f"{DEGENERATE_FRACTION:.1%} of one vehicle's ({one:.3g}): they stand on nearly "
+        "every demand atom"
+    )
+
+
+def refuse_degenerate(inst: Instance, net: str, n: int) -> None:
+    """Raise :class:`InvalidInput` where :func:`degenerate` finds a reason."""
+    reason = degenerate(inst, n)
+    if reason is not None:
+        raise InvalidInput(
+            f"{network_name(net)}/{n}: {reason}: there is no relative gap to measure"
+        )
+
+
 def job(args: Job) -> dict[str, Any]:
     net, n, seed, rules, scenarios, targets, spec, spread, cost = args
     t0 = time.perf_counter()
-    inst = instance(net, n, seed, spec, spread, cost)
     record: dict[str, Any] = {
         "demand": spec,
         "spread": spread,
@@ -277,11 +303,22 @@ def job(args: Job) -> dict[str, Any]:
         "network": network_name(net),
         "vehicles": n,
         "seed": seed,
-        "edges": inst.space.network.n_edges,
-        "atoms": len(inst.demand.positions),
-        "optimum": inst.optimum[0],
-        "rules": {},
     }
+    try:  # e.g. more vehicles than the network has candidate sites
+        inst = instance(net, n, seed, spec, spread, cost)
+    except InvalidInput as e:
+        reason: str | None = str(e)
+    else:
+        record |= {
+            "edges": inst.space.network.n_edges,
+            "atoms": len(inst.demand.positions),
+            "optimum": inst.optimum[0],
+        }
+        reason = degenerate(inst, n)
+    record["rules"] = {}
+    if reason is not None:
+        print(f"{network_name(net)} n={n} seed={seed}: not measured, {reason}", file=sys.stderr)
+        return {**record, "not_measured": reason}
     for rule in rules:
         record["rules"][rule] = {
             scenario: run_rule(inst, rule, scenario, n, seed, targets) for scenario in scenarios
@@ -297,10 +334,15 @@ def job(args: Job) -> dict[str, Any]:
 
 
 def summarise(records: list[dict[str, Any]], rules: tuple[str, ...]) -> dict[str, Any]:
-    """Medians over seeds per network, size, rule, scenario and checkpoint; the worst network."""
+    """Medians over seeds per network, size, rule, scenario and checkpoint; the worst network.
+
+    Records of instances not measured (:func:`job`) are left out; ``"not_measured"``
+    lists them.
+    """
     groups: dict[tuple[str, int], list[dict[str, Any]]] = {}
     for r in records:
-        groups.setdefault((r["network"], r["vehicles"]), []).append(r)
+        if "not_measured" not in r:
+            groups.setdefault((r["network"], r["vehicles"]), []).append(r)
     table: dict[str, Any] = {}
     for (net, n), rs in sorted(groups.items()):
         entry: dict[str, Any] = {}
@@ -346,7 +388,17 @@ def summarise(records: list[dict[str, Any]], rules: tuple[str, ...]) -> dict[str
                 )
                 for label in sorted(labels, key=lambda s: int(s.lstrip("+")))
             }
-    return {"median_over_seeds": table, "worst_network": worst}
+    left_out = [
+        {
+            "network": r["network"],
+            "vehicles": r["vehicles"],
+            "seed": r["seed"],
+            "why": r["not_measured"],
+        }
+        for r in records
+        if "not_measured" in r
+    ]
+    return {"median_over_seeds": table, "worst_network": worst, "not_measured": left_out}
 
 
 def goals(summary: dict[str, Any], rule: str, baseline: str) -> dict[str, Any]:
@@ -514,6 +566,7 @@ def rest_curve(
 ) -> dict[str, Any]:
     """The cold curve of the default rule through a live ``routing-svc serve``."""
     inst = instance(net, n, seed, spec, spread, cost)
+    refuse_degenerate(inst, net, n)
     space = inst.space
     network = space.network
     vehicles = [

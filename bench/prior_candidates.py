@@ -36,7 +36,7 @@ from bench_shared import (
     refuse_unknown,
     worst_and_mean_by_size,
 )
-from learning import gap, instance
+from learning import gap, instance, refuse_degenerate
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.network import RoadSpace
@@ -78,6 +78,7 @@ def held_out_costs(space: RoadSpace, sample: list[NetPosition], n: int) -> dict[
 
 def job(net: str, n: int, demand: str, size: int, seed: int) -> dict[str, Any]:
     inst = instance(net, n, seed, demand)
+    refuse_degenerate(inst, net, n)
     sample = inst.demand.sample(np.random.default_rng([seed, 9, size]), size)
     gaps = {
         rule: gap(inst.space, fitted(inst.space, sample, n, rule), inst.demand, inst.optimum[0])

@@ -1,5 +1,6 @@
-"""``bench/learning.py --rest`` prints one JSON document on standard output: the server it
-starts for the REST curve writes its banner elsewhere."""
+"""``bench/learning.py`` prints one JSON document on standard output (with ``--rest`` too:
+the server it starts for the REST curve writes its banner elsewhere), and leaves out of
+its medians an instance whose relative gaps would mean nothing."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+
+import sumo
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -24,3 +27,32 @@ def test_rest_curve_keeps_standard_output_json(tmp_path: Path) -> None:
     assert rest["rule"] == "consolidating"
     assert set(rest["gaps"]) == {"300"}
     assert "API docs at" in done.stderr
+    assert report["not_measured"] == []
+    assert set(report["median_over_seeds"]) == {"grid/2"}
+
+
+def test_instances_without_a_meaningful_gap_are_not_measured(tmp_path: Path) -> None:
+    """SUMO's ``grid6`` has 8 car edges; three hotspots over them put 32 atoms, and 20
+    vehicles stand within a fraction of a metre of each (the optimum 0.06 m a target,
+    one vehicle's 105 m). SUMO's ``ingolstadt`` has 4 car edges and 16 candidate sites,
+    fewer than 20 vehicles. Each record says why, no median counts it, and the network
+    beside them is measured."""
+    game = Path(sumo.SUMO_HOME) / "tools" / "game"
+    grid6, ingolstadt = game / "grid6" / "grid6.net.xml", game / "fkk_in" / "ingolstadt.net.xml.gz"
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "learning.py"),
+         "--nets", f"grid6={grid6},ingolstadt={ingolstadt},grid",
+         "--vehicles", "20", "--seeds", "0", "--rules", "consolidating,probe",
+         "--scenarios", "cold", "--targets", "300", "--jobs", "1"],
+        capture_output=True, text=True, timeout=600, cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert set(report["median_over_seeds"]) == {"grid/20"}
+    why = {(x["network"], x["vehicles"], x["seed"]): x["why"] for x in report["not_measured"]}
+    assert set(why) == {("grid6", 20, 0), ("ingolstadt", 20, 0)}
+    assert "under 0.5% of one vehicle's" in why["grid6", 20, 0]
+    assert "exceeds the 16 candidate sites" in why["ingolstadt", 20, 0]
+    rules = {r["network"]: r["rules"] for r in report["records"]}
+    assert rules["grid6"] == rules["ingolstadt"] == {}
+    assert set(rules["grid"]) == {"consolidating", "probe"}
