@@ -33,10 +33,9 @@ def test_rest_curve_keeps_standard_output_json(tmp_path: Path) -> None:
 
 def test_instances_without_a_meaningful_gap_are_not_measured(tmp_path: Path) -> None:
     """SUMO's ``grid6`` has 8 car edges; three hotspots over them put 32 atoms, and 20
-    vehicles stand within a fraction of a metre of each (the optimum 0.06 m a target,
-    one vehicle's 105 m). SUMO's ``ingolstadt`` has 4 car edges and 16 candidate sites,
-    fewer than 20 vehicles. Each record says why, no median counts it, and the network
-    beside them is measured."""
+    vehicles stand within a fraction of a metre of each. SUMO's ``ingolstadt`` has 4 car
+    edges and 16 candidate sites, fewer than 20 vehicles. Each record says why, no median
+    counts it, and the network beside them is measured."""
     game = Path(sumo.SUMO_HOME) / "tools" / "game"
     grid6, ingolstadt = game / "grid6" / "grid6.net.xml", game / "fkk_in" / "ingolstadt.net.xml.gz"
     done = subprocess.run(
