@@ -69,6 +69,17 @@ def make_settings(db_url: str, tmp_path: Path, **extra: object) -> Settings:
     )
 
 
+BENCH = Path(__file__).resolve().parents[1] / "bench"
+
+
+def run_bench(script: str, cwd: Path, *options: str) -> subprocess.CompletedProcess[str]:
+    """``python bench/<script> options`` run from ``cwd``, its output captured."""
+    return subprocess.run(
+        [sys.executable, str(BENCH / script), *options],
+        capture_output=True, text=True, timeout=600, cwd=cwd,
+    )  # fmt: skip
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -6,24 +6,15 @@ from __future__ import annotations
 import json
 import math
 import statistics
-import subprocess
-import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def run(tmp_path: Path, *options: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, str(ROOT / "bench" / "drift.py"), *options],
-        capture_output=True, text=True, timeout=600, cwd=tmp_path,
-    )  # fmt: skip
+from tests.helpers import run_bench
 
 
 def test_drift_report_is_its_records(tmp_path: Path) -> None:
-    done = run(
-        tmp_path, "--nets", "grid", "--vehicles", "2", "--seeds", "0,1", "--settle", "500",
-        "--drift", "2000", "--hold", "1000", "--jobs", "1",
+    done = run_bench(
+        "drift.py", tmp_path, "--nets", "grid", "--vehicles", "2", "--seeds", "0,1",
+        "--settle", "500", "--drift", "2000", "--hold", "1000", "--jobs", "1",
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
@@ -51,7 +42,7 @@ def test_drift_refuses_bad_options_before_any_work(tmp_path: Path) -> None:
         (["--drift", "3000"], "--drift must be a positive multiple of 2000"),
         (["--hold", "0"], "--settle, --hold and --jobs must be at least 1"),
     ):
-        done = run(tmp_path, *options)
+        done = run_bench("drift.py", tmp_path, *options)
         assert done.returncode == 2, (options, done.stderr)
         assert message in done.stderr.strip().splitlines()[-1]
         assert done.stdout == ""

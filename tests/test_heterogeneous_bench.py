@@ -7,25 +7,17 @@ from __future__ import annotations
 import json
 import math
 import statistics
-import subprocess
-import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.helpers import run_bench
+
 RULES = ("probe", "paper", "consolidating", "per_type")
 
 
-def run(tmp_path: Path, *options: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, str(ROOT / "bench" / "heterogeneous.py"), *options],
-        capture_output=True, text=True, timeout=600, cwd=tmp_path,
-    )  # fmt: skip
-
-
 def test_heterogeneous_report_is_its_records(tmp_path: Path) -> None:
-    done = run(
-        tmp_path, "--nets", "grid", "--vehicles", "4", "--seeds", "0,1", "--targets", "1000",
-        "--jobs", "1",
+    done = run_bench(
+        "heterogeneous.py", tmp_path, "--nets", "grid", "--vehicles", "4", "--seeds", "0,1",
+        "--targets", "1000", "--jobs", "1",
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
@@ -66,16 +58,16 @@ def test_heterogeneous_refuses_bad_options_before_any_work(tmp_path: Path) -> No
         (["--mix", "halves"], "invalid choice: 'halves'"),
         (["--demand", "nosuch"], "--demand must be 'uniform'"),
     ):
-        done = run(tmp_path, *options)
+        done = run_bench("heterogeneous.py", tmp_path, *options)
         assert done.returncode == 2, (options, done.stderr)
         assert message in done.stderr.strip().splitlines()[-1]
         assert done.stdout == ""
 
 
 def test_a_third_of_the_targets_need_both_types(tmp_path: Path) -> None:
-    done = run(
-        tmp_path, "--nets", "drt", "--vehicles", "4", "--seeds", "0", "--targets", "300",
-        "--jobs", "1", "--mix", "thirds", "--rest",
+    done = run_bench(
+        "heterogeneous.py", tmp_path, "--nets", "drt", "--vehicles", "4", "--seeds", "0",
+        "--targets", "300", "--jobs", "1", "--mix", "thirds", "--rest",
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)

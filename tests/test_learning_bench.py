@@ -5,21 +5,18 @@ its medians an instance whose relative gaps would mean nothing."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import sumo
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.helpers import run_bench
 
 
 def test_rest_curve_keeps_standard_output_json(tmp_path: Path) -> None:
-    done = subprocess.run(
-        [sys.executable, str(ROOT / "bench" / "learning.py"), "--nets", "grid", "--vehicles", "2",
-         "--seeds", "0", "--rules", "consolidating", "--scenarios", "cold", "--targets", "300",
-         "--jobs", "1", "--rest"],
-        capture_output=True, text=True, timeout=600, cwd=tmp_path,
+    done = run_bench(
+        "learning.py", tmp_path, "--nets", "grid", "--vehicles", "2", "--seeds", "0",
+        "--rules", "consolidating", "--scenarios", "cold", "--targets", "300", "--jobs", "1",
+        "--rest",
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
@@ -38,12 +35,10 @@ def test_instances_without_a_meaningful_gap_are_not_measured(tmp_path: Path) -> 
     counts it, and the network beside them is measured."""
     game = Path(sumo.SUMO_HOME) / "tools" / "game"
     grid6, ingolstadt = game / "grid6" / "grid6.net.xml", game / "fkk_in" / "ingolstadt.net.xml.gz"
-    done = subprocess.run(
-        [sys.executable, str(ROOT / "bench" / "learning.py"),
-         "--nets", f"grid6={grid6},ingolstadt={ingolstadt},grid",
-         "--vehicles", "20", "--seeds", "0", "--rules", "consolidating,probe",
-         "--scenarios", "cold", "--targets", "300", "--jobs", "1"],
-        capture_output=True, text=True, timeout=600, cwd=tmp_path,
+    done = run_bench(
+        "learning.py", tmp_path, "--nets", f"grid6={grid6},ingolstadt={ingolstadt},grid",
+        "--vehicles", "20", "--seeds", "0", "--rules", "consolidating,probe",
+        "--scenarios", "cold", "--targets", "300", "--jobs", "1",
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)

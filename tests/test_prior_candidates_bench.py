@@ -6,19 +6,15 @@ from __future__ import annotations
 import json
 import math
 import statistics
-import subprocess
-import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.helpers import run_bench
 
 
 def test_prior_candidates_report_is_its_records(tmp_path: Path) -> None:
-    done = subprocess.run(
-        [sys.executable, str(ROOT / "bench" / "prior_candidates.py"), "--nets", "grid",
-         "--vehicles", "2", "--demands", "hotspots:3,uniform", "--samples", "300",
-         "--seeds", "0,1"],
-        capture_output=True, text=True, timeout=600, cwd=tmp_path,
+    done = run_bench(
+        "prior_candidates.py", tmp_path, "--nets", "grid", "--vehicles", "2",
+        "--demands", "hotspots:3,uniform", "--samples", "300", "--seeds", "0,1",
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
@@ -47,10 +43,7 @@ def test_prior_candidates_refuses_bad_options_before_any_work(tmp_path: Path) ->
         (["--samples", "5", "--vehicles", "8"], "at least as many targets as the largest fleet"),
         (["--demands", "bogus:1"], "--demand must be"),
     ):
-        done = subprocess.run(
-            [sys.executable, str(ROOT / "bench" / "prior_candidates.py"), *options],
-            capture_output=True, text=True, timeout=300, cwd=tmp_path,
-        )  # fmt: skip
+        done = run_bench("prior_candidates.py", tmp_path, *options)
         assert done.returncode == 2, (options, done.stderr)
         assert message in done.stderr.strip().splitlines()[-1]
         assert done.stdout == ""

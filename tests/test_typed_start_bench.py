@@ -6,22 +6,15 @@ from __future__ import annotations
 import json
 import math
 import statistics
-import subprocess
-import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def run(tmp_path: Path, *options: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, str(ROOT / "bench" / "typed_start.py"), *options],
-        capture_output=True, text=True, timeout=600, cwd=tmp_path,
-    )  # fmt: skip
+from tests.helpers import run_bench
 
 
 def test_typed_start_report_is_its_records(tmp_path: Path) -> None:
-    done = run(tmp_path, "--nets", "grid", "--calls", "60", "--seeds", "0,1,2")
+    done = run_bench(
+        "typed_start.py", tmp_path, "--nets", "grid", "--calls", "60", "--seeds", "0,1,2"
+    )
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
     records = report["records"]
@@ -50,7 +43,7 @@ def test_typed_start_refuses_bad_options_before_any_work(tmp_path: Path) -> None
         (["--calls", "5"], "a history needs at least 8 calls"),
         (["--demand", "bogus:1"], "--demand must be"),
     ):
-        done = run(tmp_path, *options)
+        done = run_bench("typed_start.py", tmp_path, *options)
         assert done.returncode == 2, (options, done.stderr)
         assert message in done.stderr.strip().splitlines()[-1]
         assert done.stdout == ""

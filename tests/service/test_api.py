@@ -239,15 +239,8 @@ def test_each_type_starts_at_the_optimum_of_the_whole_sample(client: TestClient)
     # each type counts the whole sample in its step sizes: per type, every target goes
     # to the closest vehicle of that type (ties: lower id)
     steps = client.get("/v1/fleets/f1/metrics").json()["step_size"]
-    a, power = fleet["step"]["a"], fleet["step"]["power"]
-    points = [NetPosition(NET.edge_index[t["edge"]], 0.0) for t in sample]
     for kind in ("A", "B"):
-        ids = sorted(v for v in at if v[0] == kind.lower())
-        starts = [NetPosition(NET.edge_index[at[v]["edge"]], at[v]["offset"]) for v in ids]
-        counts = np.bincount(SPACE.cost_matrix(starts, points).argmin(axis=0), minlength=len(ids))
-        assert counts.sum() == len(sample)
-        for v, k in zip(ids, counts, strict=True):
-            assert steps[v] == pytest.approx(a / (k + 1) ** power)
+        _steps_match_counts(steps, fleet, sorted(v for v in at if v[0] == kind.lower()), sample)
 
 
 def _steps_match_counts(
