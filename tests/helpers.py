@@ -80,6 +80,16 @@ def run_bench(script: str, cwd: Path, *options: str) -> subprocess.CompletedProc
     )  # fmt: skip
 
 
+def assert_bench_refuses(script: str, cwd: Path, cases: Sequence[tuple[list[str], str]]) -> None:
+    """Each ``(options, message)`` of ``cases`` makes ``bench/<script>`` exit 2 with
+    ``message`` in the last line of its standard error, before printing any result."""
+    for options, message in cases:
+        done = run_bench(script, cwd, *options)
+        assert done.returncode == 2, (options, done.stderr)
+        assert message in done.stderr.strip().splitlines()[-1]
+        assert done.stdout == ""
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -8,7 +8,7 @@ import math
 import statistics
 from pathlib import Path
 
-from tests.helpers import run_bench
+from tests.helpers import assert_bench_refuses, run_bench
 
 
 def test_drift_report_is_its_records(tmp_path: Path) -> None:
@@ -37,12 +37,12 @@ def test_drift_report_is_its_records(tmp_path: Path) -> None:
 
 
 def test_drift_refuses_bad_options_before_any_work(tmp_path: Path) -> None:
-    for options, message in (
-        (["--nets", "nosuch"], "'nosuch' is neither a known network"),
-        (["--drift", "3000"], "--drift must be a positive multiple of 2000"),
-        (["--hold", "0"], "--settle, --hold and --jobs must be at least 1"),
-    ):
-        done = run_bench("drift.py", tmp_path, *options)
-        assert done.returncode == 2, (options, done.stderr)
-        assert message in done.stderr.strip().splitlines()[-1]
-        assert done.stdout == ""
+    assert_bench_refuses(
+        "drift.py",
+        tmp_path,
+        [
+            (["--nets", "nosuch"], "'nosuch' is neither a known network"),
+            (["--drift", "3000"], "--drift must be a positive multiple of 2000"),
+            (["--hold", "0"], "--settle, --hold and --jobs must be at least 1"),
+        ],
+    )

@@ -9,7 +9,7 @@ import math
 import statistics
 from pathlib import Path
 
-from tests.helpers import run_bench
+from tests.helpers import assert_bench_refuses, run_bench
 
 RULES = ("probe", "paper", "consolidating", "per_type")
 
@@ -51,17 +51,17 @@ def test_heterogeneous_report_is_its_records(tmp_path: Path) -> None:
 
 
 def test_heterogeneous_refuses_bad_options_before_any_work(tmp_path: Path) -> None:
-    for options, message in (
-        (["--nets", "nosuch"], "'nosuch' is neither a known network"),
-        (["--targets", "10"], "--targets must be at least 300 and --jobs at least 1"),
-        (["--vehicles", "1"], "--vehicles: at least 2 (one of each type)"),
-        (["--mix", "halves"], "invalid choice: 'halves'"),
-        (["--demand", "nosuch"], "--demand must be 'uniform'"),
-    ):
-        done = run_bench("heterogeneous.py", tmp_path, *options)
-        assert done.returncode == 2, (options, done.stderr)
-        assert message in done.stderr.strip().splitlines()[-1]
-        assert done.stdout == ""
+    assert_bench_refuses(
+        "heterogeneous.py",
+        tmp_path,
+        [
+            (["--nets", "nosuch"], "'nosuch' is neither a known network"),
+            (["--targets", "10"], "--targets must be at least 300 and --jobs at least 1"),
+            (["--vehicles", "1"], "--vehicles: at least 2 (one of each type)"),
+            (["--mix", "halves"], "invalid choice: 'halves'"),
+            (["--demand", "nosuch"], "--demand must be 'uniform'"),
+        ],
+    )
 
 
 def test_a_third_of_the_targets_need_both_types(tmp_path: Path) -> None:

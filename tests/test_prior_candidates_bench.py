@@ -8,7 +8,7 @@ import math
 import statistics
 from pathlib import Path
 
-from tests.helpers import run_bench
+from tests.helpers import assert_bench_refuses, run_bench
 
 
 def test_prior_candidates_report_is_its_records(tmp_path: Path) -> None:
@@ -37,13 +37,16 @@ def test_prior_candidates_report_is_its_records(tmp_path: Path) -> None:
 
 
 def test_prior_candidates_refuses_bad_options_before_any_work(tmp_path: Path) -> None:
-    for options, message in (
-        (["--nets", "nosuch"], "'nosuch' is neither a known network"),
-        (["--vehicles", "0"], "a fleet has at least one vehicle"),
-        (["--samples", "5", "--vehicles", "8"], "at least as many targets as the largest fleet"),
-        (["--demands", "bogus:1"], "--demand must be"),
-    ):
-        done = run_bench("prior_candidates.py", tmp_path, *options)
-        assert done.returncode == 2, (options, done.stderr)
-        assert message in done.stderr.strip().splitlines()[-1]
-        assert done.stdout == ""
+    assert_bench_refuses(
+        "prior_candidates.py",
+        tmp_path,
+        [
+            (["--nets", "nosuch"], "'nosuch' is neither a known network"),
+            (["--vehicles", "0"], "a fleet has at least one vehicle"),
+            (
+                ["--samples", "5", "--vehicles", "8"],
+                "at least as many targets as the largest fleet",
+            ),
+            (["--demands", "bogus:1"], "--demand must be"),
+        ],
+    )

@@ -8,7 +8,7 @@ import math
 import statistics
 from pathlib import Path
 
-from tests.helpers import run_bench
+from tests.helpers import assert_bench_refuses, run_bench
 
 
 def test_typed_start_report_is_its_records(tmp_path: Path) -> None:
@@ -38,12 +38,12 @@ def test_typed_start_report_is_its_records(tmp_path: Path) -> None:
 
 
 def test_typed_start_refuses_bad_options_before_any_work(tmp_path: Path) -> None:
-    for options, message in (
-        (["--nets", "nosuch"], "'nosuch' is neither a known network"),
-        (["--calls", "5"], "a history needs at least 8 calls"),
-        (["--demand", "bogus:1"], "--demand must be"),
-    ):
-        done = run_bench("typed_start.py", tmp_path, *options)
-        assert done.returncode == 2, (options, done.stderr)
-        assert message in done.stderr.strip().splitlines()[-1]
-        assert done.stdout == ""
+    assert_bench_refuses(
+        "typed_start.py",
+        tmp_path,
+        [
+            (["--nets", "nosuch"], "'nosuch' is neither a known network"),
+            (["--calls", "5"], "a history needs at least 8 calls"),
+            (["--demand", "bogus:1"], "--demand must be"),
+        ],
+    )
