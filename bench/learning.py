@@ -29,7 +29,9 @@ places) is not measured: its record says why, and the summary lists it under
 Run: ``python bench/learning.py`` (everything; long) or, e.g.,
 ``python bench/learning.py --nets drt,bologna --seeds 0,1 --targets 10000``; a network
 of your own is ``--nets town=town.net.xml.gz``; ``--cost time`` prices every path in
-free-flow travel time instead of metres.
+free-flow travel time instead of metres; ``--anywhere`` draws targets anywhere along the
+road, not at the demand's atoms only (:mod:`continuous`), each gap then on a fine model of
+that demand.
 """
 
 from __future__ import annotations
@@ -55,6 +57,7 @@ from typing import Any
 import httpx
 import numpy as np
 from bench_shared import NETWORKS, finished, network_file, network_name, refuse_unknown
+from continuous import continuous as along_the_road
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.demand.spec import DemandRecipe, Hotspots, network_demand, parse_demand_spec
@@ -113,9 +116,11 @@ def instance(
     spread: float | None = None,
     cost: CostKind = "length",
     shift: bool = True,
+    anywhere: bool = False,
 ) -> Instance:
     """The instance of ``net`` for ``n`` vehicles and ``seed``; ``shift=False`` leaves
-    the shifted demand unsolved (it is then the demand itself)."""
+    the shifted demand unsolved (it is then the demand itself); ``anywhere``: targets
+    anywhere along the road (:func:`continuous.continuous`), priced by its fine model."""
     network = load_network(network_file(net))
     space = RoadSpace(network, cost=cost)
     recipe = parse_demand_spec(spec)
@@ -125,9 +130,15 @@ def instance(
         recipe = DemandRecipe(Hotspots(recipe.form.count, metres), recipe.profile)
     demand = network_demand(network, recipe, rng=np.random.default_rng([seed, 0]))
     optimum, matrix, sites = optimum_of(space, demand, n)
+    if anywhere:
+        demand, optimum, matrix = anywhere_along(space, demand, n, optimum, sites)
     if shift and isinstance(recipe.form, Hotspots):  # the hotspots move: new centres
         shifted = network_demand(network, recipe, rng=np.random.default_rng([seed, 2]))
         shifted_optimum, shifted_matrix, shifted_sites = optimum_of(space, shifted, n)
+        if anywhere:
+            shifted, shifted_optimum, shifted_matrix = anywhere_along(
+                space, shifted, n, shifted_optimum, shifted_sites
+            )
     else:  # a demand without centres to move (or not asked to) has no shift
         shifted, shifted_optimum, shifted_matrix, shifted_sites = demand, optimum, matrix, sites
     edges = np.random.default_rng([seed, 3]).choice(  # distinct edges while there are enough
@@ -146,6 +157,23 @@ def instance(
         shifted_sites,
         start,
     )
+
+
+def anywhere_along(
+    space: RoadSpace,
+    demand: DemandDistribution[NetPosition],
+    n: int,
+    optimum: tuple[float, list[NetPosition]],
+    sites: list[NetPosition],
+) -> tuple[DemandDistribution[NetPosition], tuple[float, list[NetPosition]], FloatArray]:
+    """``demand`` drawn anywhere along the road, its optimum over the candidate ``sites``
+    of ``demand`` (or ``demand``'s own ``optimum``, priced on the fine model, where that
+    costs less) and the sites' cost matrix to its fine model."""
+    fine = along_the_road(space.network, demand)
+    best = solve_demand(space, fine, n, sites=sites)
+    found = (best.objective, best.positions)
+    kept = expected_cost(space, optimum[1], np.ones(n), fine)
+    return fine, (kept, optimum[1]) if kept < found[0] else found, best.matrix
 
 
 def gap(space: RoadSpace, positions: list[NetPosition], demand: Any, optimum: float) -> float:
@@ -264,7 +292,7 @@ def anchor_gaps(inst: Instance, n: int, seed: int, targets: int) -> dict[str, di
     return out
 
 
-Job = tuple[str, int, int, tuple[str, ...], tuple[str, ...], int, str, float | None, CostKind]
+Job = tuple[str, int, int, tuple[str, ...], tuple[str, ...], int, str, float | None, CostKind, bool]
 
 
 def degenerate(inst: Instance, n: int) -> str | None:
@@ -274,7 +302,7 @@ def degenerate(inst: Instance, n: int) -> str | None:
     optimum of one vehicle: ``n`` vehicles stand on (nearly) every demand atom, so that
     a fraction of a metre a target reads as a gap of many per cent.
     """
-    one = solve_demand(inst.space, inst.demand, 1).objective
+    one = solve_demand(inst.space, inst.demand, 1, sites=inst.sites).objective
     if inst.optimum[0] > 0.0 and inst.optimum[0] >= DEGENERATE_FRACTION * one:
         return None
     return (
@@ -294,18 +322,19 @@ def refuse_degenerate(inst: Instance, net: str, n: int) -> None:
 
 
 def job(args: Job) -> dict[str, Any]:
-    net, n, seed, rules, scenarios, targets, spec, spread, cost = args
+    net, n, seed, rules, scenarios, targets, spec, spread, cost, anywhere = args
     t0 = time.perf_counter()
     record: dict[str, Any] = {
         "demand": spec,
         "spread": spread,
         "cost": cost,
+        "anywhere": anywhere,
         "network": network_name(net),
         "vehicles": n,
         "seed": seed,
     }
     try:  # e.g. more vehicles than the network has candidate sites
-        inst = instance(net, n, seed, spec, spread, cost)
+        inst = instance(net, n, seed, spec, spread, cost, anywhere=anywhere)
     except InvalidInput as e:
         reason: str | None = str(e)
     else:
@@ -562,10 +591,17 @@ def rest_run(
 
 
 def rest_curve(
-    net: str, n: int, seed: int, targets: int, spec: str, spread: float | None, cost: CostKind
+    net: str,
+    n: int,
+    seed: int,
+    targets: int,
+    spec: str,
+    spread: float | None,
+    cost: CostKind,
+    anywhere: bool = False,
 ) -> dict[str, Any]:
     """The cold curve of the default rule through a live ``routing-svc serve``."""
-    inst = instance(net, n, seed, spec, spread, cost)
+    inst = instance(net, n, seed, spec, spread, cost, anywhere=anywhere)
     refuse_degenerate(inst, net, n)
     space = inst.space
     network = space.network
@@ -614,6 +650,12 @@ def main() -> int:
         default="length",
         help="shortest-path cost of every fleet: metres or free-flow travel time (default length)",
     )
+    p.add_argument(
+        "--anywhere",
+        action="store_true",
+        help="targets anywhere along the road, not at the demand's atoms (the gap on a fine "
+        "model of that demand)",
+    )
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--rest", action="store_true", help="add one curve through the REST API")
     p.add_argument("--out", type=Path, help="also write the JSON here")
@@ -637,7 +679,7 @@ def main() -> int:
         p.error("--spread must be a fraction > 0")
     if "shift" in scenarios and not isinstance(form, Hotspots):
         p.error(f"a shift moves hotspots; --demand {args.demand} has none (--scenarios cold,warm)")
-    demand = (args.demand, args.spread, args.cost)
+    demand = (args.demand, args.spread, args.cost, args.anywhere)
     work: list[Job] = [
         (net, int(n), int(seed), rules, scenarios, args.targets, *demand)
         for net in nets
@@ -665,6 +707,7 @@ def main() -> int:
         else sorted({r.get("demand", DEFAULT_DEMAND) for r in records}),
         "spread": args.spread,
         "cost": args.cost,
+        "anywhere": args.anywhere,
         "baseline": {"compute": "probe (the compiled update of the rule before)"},
         "checkpoints": list(CHECKPOINTS),
         "shift": {"at": SHIFT_AT, "after": list(AFTER_SHIFT)},
@@ -682,6 +725,7 @@ def main() -> int:
             args.demand,
             args.spread,
             args.cost,
+            args.anywhere,
         )
     text = json.dumps(report, indent=1)
     if args.out:

@@ -1,0 +1,104 @@
+"""``bench/continuous.py``: targets anywhere along the road, and the fine model that prices
+them, checked against its definition and against a dense sum of the exact costs; and
+``bench/learning.py --anywhere`` measures fleets on that model."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from routing_svc.demand import DemandDistribution
+from routing_svc.demand.network import hotspot_mixture
+from routing_svc.network import RoadSpace, load_network
+from routing_svc.network.catalogue import resolve_network
+from routing_svc.optimum import expected_cost
+from routing_svc.types import NetPosition
+from tests.helpers import run_bench
+
+sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # after every other module
+from continuous import CONTINUOUS_PARTS, continuous
+
+
+def _town() -> tuple[RoadSpace, DemandDistribution[NetPosition]]:
+    network = load_network(resolve_network("grid"))
+    return RoadSpace(network), hotspot_mixture(network, rng=np.random.default_rng(3))
+
+
+def test_targets_fall_within_the_piece_of_an_atom_and_never_on_one() -> None:
+    space, coarse = _town()
+    network = space.network
+    demand = continuous(network, coarse)
+    atoms = set(demand.coarse.positions)
+    drawn = demand.sample(np.random.default_rng(7), 4000)
+    again = demand.sample(np.random.default_rng(7), 4000)
+    assert drawn == again
+    assert not atoms & set(drawn)
+    assert len(set(drawn)) == len(drawn)
+    by_edge: dict[int, list[float]] = {}
+    for z in demand.coarse.positions:
+        by_edge.setdefault(z.edge, []).append(z.offset)
+    for z in drawn:
+        length = float(network.length[z.edge])
+        piece = length / max(1, math.ceil(length / 20.0))
+        nearest = min(by_edge[z.edge], key=lambda x: abs(x - z.offset))
+        assert abs(z.offset - nearest) <= piece / 2 + 1e-9
+        assert 0.0 <= z.offset <= length
+
+
+def test_the_fine_model_splits_each_atom_evenly_along_its_piece() -> None:
+    space, coarse = _town()
+    demand = continuous(space.network, coarse)
+    k = CONTINUOUS_PARTS
+    assert len(demand.positions) == k * len(demand.coarse.positions)
+    assert math.isclose(float(demand.weights.sum()), 1.0, abs_tol=1e-12)
+    for j, z in enumerate(demand.coarse.positions):
+        parts = demand.positions[k * j : k * (j + 1)]
+        assert {p.edge for p in parts} == {z.edge}
+        assert math.isclose(sum(p.offset for p in parts) / k, z.offset, abs_tol=1e-9)
+        steps = np.diff([p.offset for p in parts])
+        assert np.allclose(steps, demand.pieces[j] / k)
+        assert np.allclose(demand.weights[k * j : k * (j + 1)], demand.coarse.weights[j] / k)
+
+
+def test_the_fine_model_prices_a_fleet_as_a_dense_sum_along_the_pieces() -> None:
+    """Three vehicles at the heaviest atoms of a one-way network: the expected cost on the
+    fine model against 200 points a piece (on a one-way street the half of a piece behind
+    a vehicle costs a loop round the block, which the coarse atoms do not see)."""
+    network = load_network(resolve_network("oneway"))
+    space = RoadSpace(network)
+    coarse = hotspot_mixture(network, rng=np.random.default_rng(3))
+    demand = continuous(network, coarse)
+    fleet = [coarse.positions[int(i)] for i in np.argsort(coarse.weights)[::-1][:3]]
+    points, weights = [], []
+    for j, z in enumerate(coarse.positions):
+        half = demand.pieces[j] / 2
+        for x in np.linspace(z.offset - half, z.offset + half, 200):
+            points.append(NetPosition(z.edge, float(min(max(x, 0.0), demand.lengths[j]))))
+            weights.append(coarse.weights[j] / 200)
+    dense = float(np.asarray(weights) @ space.cost_matrix(fleet, points).min(axis=0))
+    fine = expected_cost(space, fleet, np.ones(3), demand)
+    at_atoms = expected_cost(space, fleet, np.ones(3), coarse)
+    assert math.isclose(fine, dense, rel_tol=1.5e-3)
+    assert abs(fine - dense) < abs(at_atoms - dense) / 3
+
+
+def test_learning_bench_measures_targets_anywhere(tmp_path: Path) -> None:
+    done = run_bench(
+        "learning.py", tmp_path, "--nets", "grid", "--vehicles", "4", "--seeds", "0",
+        "--rules", "consolidating", "--scenarios", "cold,warm", "--targets", "1000",
+        "--jobs", "1", "--anywhere",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert report["anywhere"] is True
+    (record,) = report["records"]
+    assert record["anywhere"] is True
+    assert record["atoms"] % CONTINUOUS_PARTS == 0
+    gaps = record["rules"]["consolidating"]
+    assert set(gaps["cold"]["gaps"]) == {"300", "1000"}
+    assert all(math.isfinite(g) for g in gaps["cold"]["gaps"].values())
+    assert all(abs(g) <= 0.015 for g in gaps["warm"]["gaps"].values())
