@@ -82,7 +82,7 @@ SCENARIOS = ("cold", "warm")
 CHECKPOINTS = (300, 1000, 3000, 10000)
 GOALS = {"cold_3000": 0.05, "warm_every": 0.05, "warm_from_3000": 0.015}
 
-Job = tuple[str, int, int, int, str, str]
+Job = tuple[str, int, int, int, str, str, bool]
 
 
 def optimum_of(
@@ -123,9 +123,11 @@ class Setting:
         return float(value / self.optimum - 1.0)
 
 
-def setting(net: str, n: int, seed: int, targets: int, mix_name: str, demand: str) -> Setting:
+def setting(
+    net: str, n: int, seed: int, targets: int, mix_name: str, demand: str, anywhere: bool = False
+) -> Setting:
     mix = MIXES[mix_name]
-    inst = instance(net, n, seed, demand, shift=False)
+    inst = instance(net, n, seed, demand, shift=False, anywhere=anywhere)
     refuse_degenerate(inst, net, n)
     types = [TYPES[0]] * (n // 2) + [TYPES[1]] * (n - n // 2)
     speeds = np.ones(n)
@@ -141,9 +143,9 @@ def setting(net: str, n: int, seed: int, targets: int, mix_name: str, demand: st
 
 
 def job(args: Job) -> dict[str, Any]:
-    net, n, seed, targets, mix_name, demand = args
+    net, n, seed, targets, mix_name, demand, anywhere = args
     t0 = time.perf_counter()
-    case = setting(net, n, seed, targets, mix_name, demand)
+    case = setting(net, n, seed, targets, mix_name, demand, anywhere)
     inst, space, types, gap = case.inst, case.inst.space, case.types, case.gap
     at_optimum, optimum, stream, needs = case.at_optimum, case.optimum, case.stream, case.needs
     marks = [k for k in CHECKPOINTS if k <= targets]
@@ -254,11 +256,11 @@ def summarise(records: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def rest_curve(
-    net: str, n: int, seed: int, targets: int, mix_name: str, demand: str
+    net: str, n: int, seed: int, targets: int, mix_name: str, demand: str, anywhere: bool = False
 ) -> dict[str, Any]:
     """The cold curve of the default rule through a live ``routing-svc serve``: a fleet of
     the two types created without a rule, the targets posted with what they need."""
-    case = setting(net, n, seed, targets, mix_name, demand)
+    case = setting(net, n, seed, targets, mix_name, demand, anywhere)
     network = case.inst.space.network
     vehicles = [
         {"id": f"v{i:03d}", "type": case.types[i], "position": wire(network, p)}
@@ -286,6 +288,11 @@ def main() -> int:
         default=DEFAULT_DEMAND,
         help="where targets are, as simulate's --demand (default hotspots:3)",
     )
+    p.add_argument(
+        "--anywhere",
+        action="store_true",
+        help="targets anywhere along the road, as bench/learning.py --anywhere",
+    )
     p.add_argument("--rest", action="store_true", help="add one cold curve through the REST API")
     args = p.parse_args()
     refuse_unknown(p, args.nets.split(","), [args.demand])
@@ -295,7 +302,7 @@ def main() -> int:
         p.error("--vehicles: at least 2 (one of each type)")
     started = time.perf_counter()
     jobs: list[Job] = [
-        (net, n, seed, args.targets, args.mix, args.demand)
+        (net, n, seed, args.targets, args.mix, args.demand, args.anywhere)
         for net in args.nets.split(",")
         for n in args.vehicles
         for seed in args.seeds
@@ -307,6 +314,7 @@ def main() -> int:
         "types": list(TYPES),
         "mix": [{"requires": list(c.requires), "share": c.share} for c in MIXES[args.mix]],
         "demand": args.demand,
+        "anywhere": args.anywhere,
         "baseline": "batch: per type, the p-median of the targets seen so far that needed it",
         "gap": "exact expected cost of objective (11) / optimum - 1",
         **summarise(records),
@@ -315,7 +323,7 @@ def main() -> int:
     report = finished(report, records, started)
     if args.rest:
         net, n, seed = args.nets.split(",")[0], args.vehicles[0], args.seeds[0]
-        curve = rest_curve(net, n, seed, args.targets, args.mix, args.demand)
+        curve = rest_curve(net, n, seed, args.targets, args.mix, args.demand, args.anywhere)
         first = next(
             r
             for r in records

@@ -1,6 +1,7 @@
 """``bench/continuous.py``: targets anywhere along the road, and the fine model that prices
 them, checked against its definition and against a dense sum of the exact costs; and
-``bench/learning.py --anywhere`` measures fleets on that model."""
+``bench/learning.py --anywhere`` and ``bench/heterogeneous.py --anywhere`` measure
+fleets on that model."""
 
 from __future__ import annotations
 
@@ -102,3 +103,19 @@ def test_learning_bench_measures_targets_anywhere(tmp_path: Path) -> None:
     assert set(gaps["cold"]["gaps"]) == {"300", "1000"}
     assert all(math.isfinite(g) for g in gaps["cold"]["gaps"].values())
     assert all(abs(g) <= 0.015 for g in gaps["warm"]["gaps"].values())
+
+
+def test_typed_bench_prices_its_optimum_on_the_same_fine_model(tmp_path: Path) -> None:
+    """The typed optimum is solved on the fine model's matrix and priced by objective (11)
+    on the fine model: the two agree; the same targets anywhere through a live service
+    learn as in process."""
+    done = run_bench(
+        "heterogeneous.py", tmp_path, "--nets", "drt", "--vehicles", "4", "--seeds", "0",
+        "--targets", "300", "--jobs", "1", "--mix", "thirds", "--rest", "--anywhere",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert report["anywhere"] is True
+    (record,) = report["records"]
+    assert abs(record["gap_at_optimum"]) < 1e-9
+    assert report["rest"]["gaps"] == report["rest"]["in_process"]
