@@ -18,6 +18,7 @@ import numpy as np
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.demand.network import DEFAULT_SPACING
+from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork
 from routing_svc.types import FloatArray, NetPosition
 
@@ -44,9 +45,16 @@ class ContinuousDemand(DemandDistribution[NetPosition]):
     lengths: FloatArray = field(kw_only=True, repr=False)
 
     def sample(self, rng: np.random.Generator, n: int) -> list[NetPosition]:
-        """``n`` targets: an atom of :attr:`coarse` each, moved uniformly within its piece."""
-        picks = rng.choice(len(self.coarse.positions), size=n, p=self.coarse.weights)
-        shifts = rng.uniform(-0.5, 0.5, size=n) * self.pieces[picks]
+        """``n`` targets: an atom of :attr:`coarse` each, moved uniformly within its piece.
+
+        Two uniform numbers a target, in draw order, so that the first ``k`` of ``n``
+        targets are the ``k`` targets drawn from the same generator state."""
+        if n < 0:
+            raise InvalidInput(f"cannot draw a negative number of targets ({n})")
+        draws = rng.random((n, 2))
+        cdf = np.cumsum(self.coarse.weights)
+        picks = np.minimum(np.searchsorted(cdf / cdf[-1], draws[:, 0], side="right"), cdf.size - 1)
+        shifts = (draws[:, 1] - 0.5) * self.pieces[picks]
         out = []
         for j, shift in zip(picks.tolist(), shifts.tolist(), strict=True):
             z = self.coarse.positions[j]
