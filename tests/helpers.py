@@ -80,6 +80,15 @@ def run_bench(script: str, cwd: Path, *options: str) -> subprocess.CompletedProc
     )  # fmt: skip
 
 
+def bench_report(script: str, cwd: Path, *options: str) -> tuple[dict[str, Any], str]:
+    """:func:`run_bench`, which must succeed: the JSON document it printed, and its
+    standard error."""
+    done = run_bench(script, cwd, *options)
+    assert done.returncode == 0, done.stderr
+    report: dict[str, Any] = json.loads(done.stdout)
+    return report, done.stderr
+
+
 def assert_bench_refuses(script: str, cwd: Path, cases: Sequence[tuple[list[str], str]]) -> None:
     """Each ``(options, message)`` of ``cases`` makes ``bench/<script>`` exit 2 with
     ``message`` in the last line of its standard error, before printing any result."""

@@ -5,7 +5,6 @@ fleets on that model."""
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
@@ -18,7 +17,7 @@ from routing_svc.network import RoadSpace, load_network
 from routing_svc.network.catalogue import resolve_network
 from routing_svc.optimum import expected_cost
 from routing_svc.types import NetPosition
-from tests.helpers import run_bench
+from tests.helpers import bench_report
 
 sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # after every other module
 from continuous import CONTINUOUS_PARTS, continuous
@@ -102,13 +101,11 @@ def test_the_fine_model_prices_a_fleet_as_a_dense_sum_along_the_pieces() -> None
 
 
 def test_learning_bench_measures_targets_anywhere(tmp_path: Path) -> None:
-    done = run_bench(
+    report, _ = bench_report(
         "learning.py", tmp_path, "--nets", "grid", "--vehicles", "4", "--seeds", "0",
         "--rules", "consolidating", "--scenarios", "cold,warm", "--targets", "1000",
         "--jobs", "1", "--anywhere",
     )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    report = json.loads(done.stdout)
     assert report["anywhere"] is True
     (record,) = report["records"]
     assert record["anywhere"] is True
@@ -123,12 +120,10 @@ def test_typed_bench_prices_its_optimum_on_the_same_fine_model(tmp_path: Path) -
     """The typed optimum is solved on the fine model's matrix and priced by objective (11)
     on the fine model: the two agree; the same targets anywhere through a live service
     learn as in process."""
-    done = run_bench(
+    report, _ = bench_report(
         "heterogeneous.py", tmp_path, "--nets", "drt", "--vehicles", "4", "--seeds", "0",
         "--targets", "300", "--jobs", "1", "--mix", "thirds", "--rest", "--anywhere",
     )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    report = json.loads(done.stdout)
     assert report["anywhere"] is True
     (record,) = report["records"]
     assert abs(record["gap_at_optimum"]) < 1e-9

@@ -3,21 +3,18 @@ the checkpoints of its drift, and refuses bad options before any work."""
 
 from __future__ import annotations
 
-import json
 import math
 import statistics
 from pathlib import Path
 
-from tests.helpers import assert_bench_refuses, run_bench
+from tests.helpers import assert_bench_refuses, bench_report
 
 
 def test_drift_report_is_its_records(tmp_path: Path) -> None:
-    done = run_bench(
+    report, _ = bench_report(
         "drift.py", tmp_path, "--nets", "grid", "--vehicles", "2", "--seeds", "0,1",
         "--settle", "500", "--drift", "2000", "--hold", "1000", "--jobs", "1",
     )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    report = json.loads(done.stdout)
     records = report["records"]
     assert [(r["network"], r["vehicles"], r["seed"]) for r in records] == [
         ("grid", 2, 0),

@@ -4,23 +4,20 @@ through the REST API, and refuses bad options before any work."""
 
 from __future__ import annotations
 
-import json
 import math
 import statistics
 from pathlib import Path
 
-from tests.helpers import assert_bench_refuses, run_bench
+from tests.helpers import assert_bench_refuses, bench_report
 
 RULES = ("probe", "paper", "consolidating", "per_type")
 
 
 def test_heterogeneous_report_is_its_records(tmp_path: Path) -> None:
-    done = run_bench(
+    report, _ = bench_report(
         "heterogeneous.py", tmp_path, "--nets", "grid", "--vehicles", "4", "--seeds", "0,1",
         "--targets", "1000", "--jobs", "1",
     )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    report = json.loads(done.stdout)
     records = report["records"]
     assert [(r["network"], r["vehicles"], r["seed"]) for r in records] == [
         ("grid", 4, 0),
@@ -65,12 +62,10 @@ def test_heterogeneous_refuses_bad_options_before_any_work(tmp_path: Path) -> No
 
 
 def test_a_third_of_the_targets_need_both_types(tmp_path: Path) -> None:
-    done = run_bench(
+    report, log = bench_report(
         "heterogeneous.py", tmp_path, "--nets", "drt", "--vehicles", "4", "--seeds", "0",
         "--targets", "300", "--jobs", "1", "--mix", "thirds", "--rest",
     )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    report = json.loads(done.stdout)
     assert [c["requires"] for c in report["mix"]] == [["A"], ["B"], ["A", "B"]]
     assert sum(c["share"] for c in report["mix"]) == 1.0
     (record,) = report["records"]
@@ -84,4 +79,4 @@ def test_a_third_of_the_targets_need_both_types(tmp_path: Path) -> None:
     assert rest["rule"] == "consolidating"
     assert rest["in_process"] == record["consolidating"]["cold"]
     assert rest["gaps"] == rest["in_process"]
-    assert "API docs at" in done.stderr  # the server's banner, kept off standard output
+    assert "API docs at" in log  # the server's banner, kept off standard output

@@ -4,26 +4,23 @@ its medians an instance whose relative gaps would mean nothing."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import sumo
 
-from tests.helpers import run_bench
+from tests.helpers import bench_report
 
 
 def test_rest_curve_keeps_standard_output_json(tmp_path: Path) -> None:
-    done = run_bench(
+    report, log = bench_report(
         "learning.py", tmp_path, "--nets", "grid", "--vehicles", "2", "--seeds", "0",
         "--rules", "consolidating", "--scenarios", "cold", "--targets", "300", "--jobs", "1",
         "--rest",
     )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    report = json.loads(done.stdout)
     rest = report["rest"]
     assert rest["rule"] == "consolidating"
     assert set(rest["gaps"]) == {"300"}
-    assert "API docs at" in done.stderr
+    assert "API docs at" in log
     assert report["not_measured"] == []
     assert set(report["median_over_seeds"]) == {"grid/2"}
 
@@ -35,13 +32,11 @@ def test_instances_without_a_meaningful_gap_are_not_measured(tmp_path: Path) -> 
     counts it, and the network beside them is measured."""
     game = Path(sumo.SUMO_HOME) / "tools" / "game"
     grid6, ingolstadt = game / "grid6" / "grid6.net.xml", game / "fkk_in" / "ingolstadt.net.xml.gz"
-    done = run_bench(
+    report, _ = bench_report(
         "learning.py", tmp_path, "--nets", f"grid6={grid6},ingolstadt={ingolstadt},grid",
         "--vehicles", "20", "--seeds", "0", "--rules", "consolidating,probe",
         "--scenarios", "cold", "--targets", "300", "--jobs", "1",
     )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    report = json.loads(done.stdout)
     assert set(report["median_over_seeds"]) == {"grid/20"}
     why = {(x["network"], x["vehicles"], x["seed"]): x["why"] for x in report["not_measured"]}
     assert set(why) == {("grid6", 20, 0), ("ingolstadt", 20, 0)}

@@ -3,21 +3,18 @@ records, and whose cross-validated rule takes the gap of the rule it chose."""
 
 from __future__ import annotations
 
-import json
 import math
 import statistics
 from pathlib import Path
 
-from tests.helpers import assert_bench_refuses, run_bench
+from tests.helpers import assert_bench_refuses, bench_report
 
 
 def test_prior_candidates_report_is_its_records(tmp_path: Path) -> None:
-    done = run_bench(
+    report, _ = bench_report(
         "prior_candidates.py", tmp_path, "--nets", "grid", "--vehicles", "2",
         "--demands", "hotspots:3,uniform", "--samples", "300", "--seeds", "0,1",
     )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    report = json.loads(done.stdout)
     records = report["records"]
     assert len(records) == 4
     for r in records:

@@ -3,20 +3,17 @@ and refuses bad options before any work."""
 
 from __future__ import annotations
 
-import json
 import math
 import statistics
 from pathlib import Path
 
-from tests.helpers import assert_bench_refuses, run_bench
+from tests.helpers import assert_bench_refuses, bench_report
 
 
 def test_typed_start_report_is_its_records(tmp_path: Path) -> None:
-    done = run_bench(
+    report, _ = bench_report(
         "typed_start.py", tmp_path, "--nets", "grid", "--calls", "60", "--seeds", "0,1,2"
     )
-    assert done.returncode == 0, done.stderr
-    report = json.loads(done.stdout)
     records = report["records"]
     assert [(r["network"], r["calls"], r["seed"]) for r in records] == [
         ("grid", 60, 0),
