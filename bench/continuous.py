@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from routing_svc.demand import DemandDistribution
-from routing_svc.demand.network import DEFAULT_SPACING
+from routing_svc.demand.network import DEFAULT_SPACING, piece_counts
 from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork
 from routing_svc.types import FloatArray, NetPosition
@@ -75,7 +75,7 @@ def continuous(
     edges = np.array([z.edge for z in coarse.positions], dtype=np.int64)
     offsets = np.array([z.offset for z in coarse.positions])
     lengths = network.length[edges].astype(np.float64)
-    pieces = lengths / np.maximum(1.0, np.ceil(lengths / spacing))
+    pieces = lengths / piece_counts(lengths, spacing)
     middles = (np.arange(parts) + 0.5) / parts - 0.5
     fine = np.clip(offsets[:, None] + middles[None, :] * pieces[:, None], 0.0, lengths[:, None])
     positions = tuple(

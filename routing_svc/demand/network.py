@@ -214,6 +214,12 @@ def from_edge_weights(
     )
 
 
+def piece_counts(lengths: FloatArray, spacing: float) -> IntArray:
+    """How many equal pieces of at most ``spacing`` metres each edge length is cut into
+    (at least one)."""
+    return np.maximum(1, np.ceil(lengths / spacing)).astype(np.int64)
+
+
 def edge_pieces(
     network: CompiledNetwork, *, spacing: float, edges: IntArray | None = None
 ) -> tuple[IntArray, FloatArray, FloatArray]:
@@ -238,7 +244,7 @@ def edge_pieces(
         raise InvalidInput(f"spacing must be a finite number of metres > 0, got {spacing!r}")
     chosen = np.arange(network.n_edges) if edges is None else np.asarray(edges, dtype=np.int64)
     length = network.length[chosen]
-    count = np.maximum(1, np.ceil(length / spacing)).astype(np.int64)
+    count = piece_counts(length, spacing)
     edge_of = np.repeat(chosen, count)
     first = np.concatenate([[0], np.cumsum(count)[:-1]])
     rank = np.arange(int(count.sum())) - np.repeat(first, count)
