@@ -24,7 +24,8 @@ references were accepted, so that they were not fitted to it) is then priced fro
 the configuration solved without its fold, a cross-validated estimate of what
 solving again gains over the current references. Only if the
 gain exceeds ``confidence`` standard errors of the paired differences
-(``settled_confidence`` once the epoch's clock has reached ``longest``; at least
+(``settled_confidence`` once the epoch's clock has reached ``longest`` or the
+references are the fit of a full reservoir of the epoch; at least
 ``unfitted_confidence`` while no consolidation of the epoch has fitted the references,
 which held steps then do not move either) is the
 problem solved on the whole reservoir, from the current and the last accepted
@@ -47,7 +48,13 @@ at the last consolidation. Blocks in a row that each cost ``shift_ratio`` times 
 together by more than ``shift_confidence`` standard errors of their mean (so that the
 heavy tail of a concentrated demand's costs is not taken for a move, while a moderate
 move shows within a few blocks), start a new epoch (the demand moved): the reservoir
-keeps the last block only and the schedule starts again.
+keeps the last block only and the schedule starts again. A demand can also move where its
+cost does not grow (hotspots that move closer together): so, in a fleet that learns as one,
+each block of targets is also tested for who won them. Under the demand the references
+were last fitted to, the closest reference of each target falls on vehicle ``i`` with the
+share ``pi_i`` it served of their reservoir; a block's wins whose G statistic against
+these shares exceeds the chi-square quantile of ``1 - share_alpha`` (``p - 1`` degrees
+of freedom) start a new epoch as well.
 
 Each consolidation is recorded with the target that triggered it
 (:class:`Consolidation`), so that replay applies it without solving again.
@@ -61,9 +68,11 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any, Generic, Protocol, runtime_checkable
 
 import numpy as np
+from scipy.special import chdtri
 
 from routing_svc.errors import InvalidInput
 from routing_svc.sa.interchange import fast_interchange, greedy, neighbourhood_search
@@ -115,6 +124,11 @@ class ConsolidationPolicy:
         stayed for ``longest / (growth - 1)`` targets), where a fit of the reservoir
         is as good an estimate as it will get and a gain within the noise is no reason
         to move.
+    full_fit_settles : bool
+        References a consolidation of this epoch fitted to a full reservoir face
+        ``settled_confidence`` before the epoch's clock reaches ``longest``: a fit of a
+        reservoir no larger is no better an estimate of the same demand, and one taken
+        on a gain within the noise moves a fleet at random among its sample's fits.
     unfitted_confidence : float
         The least confidence while the references are not a consolidation's fit of this
         epoch's targets: those the fleet was created with (perhaps a good configuration,
@@ -131,6 +145,10 @@ class ConsolidationPolicy:
         Standard errors of the mean of such blocks in a row (from their own spread) by
         which it must exceed ``shift_ratio`` times the baseline; 0: the ratio alone
         decides, at the first such block.
+    share_alpha : float or None
+        The false-alarm probability of the test of each block's winners against the
+        shares the references served of the reservoir they were last fitted to
+        (:meth:`shares_moved`); ``None``: no such test.
     refit : float or None
         References that a consolidation fitted to ``m`` targets of the epoch give way to
         the fit of a reservoir of at least ``refit * m`` targets unless the
@@ -170,10 +188,12 @@ class ConsolidationPolicy:
     folds: int = 4
     confidence: float = 0.0
     settled_confidence: float = 1.0
+    full_fit_settles: bool = True
     unfitted_confidence: float = 3.0
     block: int = 250
     shift_ratio: float = 1.25
     shift_confidence: float = 2.0
+    share_alpha: float | None = 1e-9
     refit: float | None = 1.1
     tested_refit: bool = False
     fresh_baseline: bool = True
@@ -207,6 +227,12 @@ class ConsolidationPolicy:
             and self.hasten >= 0.0
         ):
             raise InvalidInput("consolidation hasten must be a finite number >= 0, or null")
+        if self.share_alpha is not None and not (
+            isinstance(self.share_alpha, float | int)
+            and not isinstance(self.share_alpha, bool)
+            and 0.0 < self.share_alpha < 1.0
+        ):
+            raise InvalidInput("consolidation share_alpha must be a number in (0, 1), or null")
         if not (math.isfinite(self.shift_ratio) and self.shift_ratio > 1.0):
             raise InvalidInput("consolidation shift_ratio must be a finite number > 1")
         if self.refit is not None and not (
@@ -218,7 +244,13 @@ class ConsolidationPolicy:
             raise InvalidInput("consolidation refit must be a finite number > 1, or null")
         if isinstance(self.shakes, bool) or not isinstance(self.shakes, int) or self.shakes < 0:
             raise InvalidInput(f"consolidation shakes must be an integer >= 0, got {self.shakes!r}")
-        for flag in ("tested_refit", "fresh_baseline", "checked_moves", "shared_targets"):
+        for flag in (
+            "tested_refit",
+            "fresh_baseline",
+            "checked_moves",
+            "shared_targets",
+            "full_fit_settles",
+        ):
             if not isinstance(getattr(self, flag), bool):
                 raise InvalidInput(f"consolidation {flag} must be true or false")
 
@@ -235,6 +267,7 @@ class ConsolidationPolicy:
             # a policy stored before any of these keeps the bytes it had then
             **({"slowest": self.slowest} if self.slowest != self.longest else {}),
             **({} if self.hasten is None else {"hasten": self.hasten}),
+            **({} if self.share_alpha is None else {"share_alpha": self.share_alpha}),
             **(
                 {"settled_confidence": self.settled_confidence}
                 if self.settled_confidence != self.confidence
@@ -245,6 +278,7 @@ class ConsolidationPolicy:
             **({"fresh_baseline": True} if self.fresh_baseline else {}),
             **({"checked_moves": True} if self.checked_moves else {}),
             **({"shared_targets": True} if self.shared_targets else {}),
+            **({"full_fit_settles": True} if self.full_fit_settles else {}),
             **({"shakes": self.shakes} if self.shakes else {}),
             **({"shift_confidence": self.shift_confidence} if self.shift_confidence else {}),
             **(
@@ -259,11 +293,12 @@ class ConsolidationPolicy:
         """A stored policy; one stored without ``refit``, ``tested_refit``,
         ``fresh_baseline``, ``checked_moves``, ``shakes``, ``slowest``,
         ``settled_confidence``, ``shift_confidence``, ``unfitted_confidence``,
-        ``hasten`` or ``shared_targets`` keeps the behaviour it was stored with (no
-        refit, a refit tested, the reservoir's baseline, unchecked moves, no shakes, the
-        epoch's clock alone, one confidence throughout, the shift test's ratio alone, no
-        more asked of references no consolidation fitted, a clock that runs from the
-        epoch's start, targets for any one vehicle feeding no type)."""
+        ``hasten``, ``shared_targets``, ``full_fit_settles`` or ``share_alpha`` keeps the
+        behaviour it was stored with (no refit, a refit tested, the reservoir's baseline,
+        unchecked moves, no shakes, the epoch's clock alone, one confidence throughout,
+        the shift test's ratio alone, no more asked of references no consolidation
+        fitted, a clock that runs from the epoch's start, targets for any one vehicle
+        feeding no type, settled by the clock alone, no test of the winners)."""
         if not isinstance(data, dict):
             raise InvalidInput("consolidation must be an object")
         legacy = {
@@ -276,6 +311,8 @@ class ConsolidationPolicy:
             "unfitted_confidence": 0.0,
             "hasten": None,
             "shared_targets": False,
+            "full_fit_settles": False,
+            "share_alpha": None,
         }
         unknown = set(data) - {*cls().to_dict(), *legacy, "slowest", "settled_confidence"}
         if unknown:
@@ -301,12 +338,15 @@ class ConsolidationPolicy:
         quiet = min(self._growth_of(now - max(epoch, accepted_at)), self.slowest)
         return now + max(clock, quiet)
 
-    def confidence_at(self, *, due: int, epoch: int, fitted: bool) -> float:
+    def confidence_at(self, *, due: int, epoch: int, fitted: int) -> float:
         """The confidence of the consolidation due at ``due`` in an epoch that began at
-        ``epoch``: :attr:`settled_confidence` once the epoch's clock has reached
-        :attr:`longest`, else :attr:`confidence`; at least :attr:`unfitted_confidence`
-        unless the references are a consolidation's fit of this epoch (``fitted``)."""
-        settled = self._growth_of(due - epoch) >= self.longest
+        ``epoch``, the references a consolidation's fit of ``fitted`` of this epoch's
+        targets (0: none): :attr:`settled_confidence` once the epoch's clock has reached
+        :attr:`longest` (or, with :attr:`full_fit_settles`, once ``fitted`` fills the
+        reservoir), else :attr:`confidence`; at least :attr:`unfitted_confidence`
+        while ``fitted`` is 0."""
+        full = self.full_fit_settles and fitted >= self.reservoir
+        settled = full or self._growth_of(due - epoch) >= self.longest
         asked = self.settled_confidence if settled else self.confidence
         return asked if fitted else max(asked, self.unfitted_confidence)
 
@@ -335,6 +375,24 @@ class ConsolidationPolicy:
         excess = mean - self.shift_ratio * baseline
         return excess > 0.0 and excess > self.shift_confidence * math.sqrt(spread / size)
 
+    def shares_moved(self, wins: Sequence[int], served: Sequence[int]) -> bool:
+        """Whether a block's ``wins`` per vehicle (whose reference was closest to each
+        target) show that the demand moved: their G statistic
+        ``2 sum_i w_i ln(w_i / (n pi_i))`` against the shares ``pi`` of the ``served``
+        counts of the last fit (:func:`expected_shares`) exceeds the chi-square quantile
+        of ``1 - share_alpha`` with ``p - 1`` degrees of freedom; never without
+        :attr:`share_alpha` or with fewer than two vehicles."""
+        if self.share_alpha is None or len(wins) < 2 or len(wins) != len(served):
+            return False
+        size = sum(wins)
+        shares = expected_shares(served)
+        statistic = 2.0 * sum(
+            won * math.log(won / (size * share))
+            for won, share in zip(wins, shares, strict=True)
+            if won > 0
+        )
+        return statistic > _chi_square_quantile(self.share_alpha, len(wins) - 1)
+
     def hastens(self, done: Consolidation[Any]) -> bool:
         """Whether ``done`` restarts the epoch's clock: taken, with a cross-validated
         gain beyond :attr:`hasten` standard errors (an untested refit has none)."""
@@ -359,6 +417,20 @@ class ConsolidationPolicy:
         return self.next_after(
             now=due, epoch=epoch, accepted_at=accepted_at, hastened_at=hastened_at
         )
+
+
+def expected_shares(served: Sequence[int]) -> list[float]:
+    """Each vehicle's expected share of the targets, from the reservoir targets it served
+    at the last fit, with half a target added to each (no share is 0)."""
+    total = sum(served) + 0.5 * len(served)
+    return [(count + 0.5) / total for count in served]
+
+
+@lru_cache(maxsize=64)
+def _chi_square_quantile(alpha: float, degrees: int) -> float:
+    """The value a chi-square variable of ``degrees`` degrees of freedom exceeds with
+    probability ``alpha``."""
+    return float(chdtri(degrees, alpha))
 
 
 @dataclass(frozen=True, slots=True)

@@ -295,6 +295,15 @@ class Learning(Generic[P]):
     partners: deque[tuple[str, ...]] = field(default_factory=deque)
     """One type's: per reservoir target, in its order, the other types it needed (empty
     for a target of this type alone); empty for the whole fleet's."""
+    served: tuple[int, ...] | None = None
+    """The reservoir targets each vehicle served at the last accepted consolidation of
+    the epoch, the shares the test of the winners expects
+    (:meth:`ConsolidationPolicy.shares_moved`; ``None``: none yet)."""
+    wins: list[int] = field(default_factory=list)
+    """Per vehicle, the targets of the current block of that test whose closest
+    reference was its (empty: no block begun)."""
+    won: int = 0
+    """The targets of that block (the sum of ``wins``)."""
 
 
 class Dispatch(NamedTuple, Generic[P]):
@@ -784,6 +793,7 @@ class Fleet(Generic[P]):
                 solved,
                 partners=partners,
                 may_consolidate=free,
+                winner=self._slot[mover] if self._tests_winners() else None,
             )
             if done is not None:
                 consolidation, consolidated = done, self._group_ids(learning)
@@ -797,6 +807,18 @@ class Fleet(Generic[P]):
         """Whether this fleet can consolidate: a space that can, and one type and one
         speed, or one speed per type (:attr:`learns_per_type`)."""
         return (self._identical or self._type_groups is not None) and _samples(type(self.space))
+
+    def _tests_winners(self) -> bool:
+        """Whether the shift test also tests who won each block
+        (:meth:`ConsolidationPolicy.shares_moved`): in a fleet that learns as one, where
+        the vehicle that moves is the one whose reference is closest."""
+        policy = self.config.consolidation
+        return (
+            policy is not None
+            and policy.share_alpha is not None
+            and self._type_groups is None
+            and self.config.learning_vehicles is LearningVehicles.ALL
+        )
 
     def _learnings(self) -> list[Learning[P]]:
         """The ``consolidating`` rule's states: the whole fleet's, or one per type."""
@@ -866,9 +888,12 @@ class Fleet(Generic[P]):
         *,
         partners: tuple[str, ...] = (),
         may_consolidate: bool = True,
+        winner: int | None = None,
     ) -> Consolidation[P] | None:
-        """Keep ``target``, run the shift test on its ``cost`` and consolidate when due
-        (and ``may_consolidate``: else it stays due).
+        """Keep ``target``, run the shift tests on its ``cost`` and on the vehicle whose
+        reference was closest (``winner``, its index in ``learning``; ``None``: no test
+        of the winners) and consolidate when due (and ``may_consolidate``: else it stays
+        due).
 
         A due consolidation is, in replay (``replaying``), the ``recorded`` one or none
         (it was solved away from the fleet and applied at a later target); live,
@@ -889,18 +914,17 @@ class Fleet(Generic[P]):
             if policy.starts_epoch(
                 cost_sum=total, square_sum=squares, size=size, baseline=learning.baseline
             ):
-                learning.run = NO_SHIFT_RUN
-                recent = list(learning.reservoir)[-policy.block :]
-                learning.reservoir.clear()
-                learning.reservoir.extend(recent)
-                kept = list(learning.partners)[-policy.block :]
-                learning.partners.clear()
-                learning.partners.extend(kept)
-                learning.epoch = now
-                learning.next_consolidation = now + policy.first
-                learning.baseline = None
-                learning.fitted = 0
+                _new_epoch(learning, policy, now)
             learning.block_cost, learning.block_squares, learning.block_size = 0.0, 0.0, 0
+        if winner is not None and learning.served is not None:
+            if not learning.wins:
+                learning.wins = [0] * len(learning.served)
+            learning.wins[winner] += 1
+            learning.won += 1
+            if learning.won >= policy.block:
+                if policy.shares_moved(learning.wins, learning.served):
+                    _new_epoch(learning, policy, now)
+                learning.wins, learning.won = [], 0
         if now < learning.next_consolidation:
             if recorded is not None:
                 raise ReplayMismatch("a consolidation was recorded where none was due")
@@ -929,6 +953,7 @@ class Fleet(Generic[P]):
             learning.holds = [None] * len(members)
             learning.accepted_at = now
             learning.fitted = done.sample
+            learning.served, learning.wins, learning.won = done.updates, [], 0
             if policy.hastens(done):
                 learning.hastened_at = now
         learning.baseline = done.fresh_baseline if policy.fresh_baseline else done.baseline
@@ -1000,7 +1025,7 @@ class Fleet(Generic[P]):
             power=self.config.objective.power,
             speed=float(self._speeds[members[0]]),
             confidence=policy.confidence_at(
-                due=learning.next_consolidation, epoch=learning.epoch, fitted=learning.fitted > 0
+                due=learning.next_consolidation, epoch=learning.epoch, fitted=learning.fitted
             ),
             updates=tuple(state.updates[i] for i in members),
             fresh=self._clock(learning) - learning.accepted_at,
@@ -1267,6 +1292,14 @@ class Fleet(Generic[P]):
                 else {}
             ),
             **({"hastened_at": learning.hastened_at} if policy.hasten is not None else {}),
+            **(
+                {
+                    "served": None if learning.served is None else list(learning.served),
+                    "wins": list(learning.wins),
+                }
+                if policy.share_alpha is not None and self._type_groups is None
+                else {}
+            ),
             **({} if self._type_groups is None else {"seen": learning.seen}),
             **(
                 {"partners": [list(kinds) for kinds in learning.partners]}
@@ -1299,6 +1332,12 @@ class Fleet(Generic[P]):
             partners = [() for _ in data["reservoir"]]
         if len(partners) != len(data["reservoir"]):
             raise InvalidInput("snapshot's partners do not match its reservoir")
+        served = data.get("served")
+        wins = [int(w) for w in data.get("wins", ())]
+        if (served is not None and len(served) != n) or (
+            wins and (served is None or len(wins) != n)
+        ):
+            raise InvalidInput("snapshot's winners do not match the fleet's vehicles")
         return Learning(
             holds=holds,
             anchor=anchor,
@@ -1316,6 +1355,9 @@ class Fleet(Generic[P]):
             hastened_at=int(data.get("hastened_at", 0)),
             vehicles=members,
             seen=int(data.get("seen", 0)),
+            served=None if served is None else tuple(int(c) for c in served),
+            wins=wins,
+            won=sum(wins),
         )
 
     def restore(self, data: dict[str, Any]) -> None:
@@ -1432,6 +1474,24 @@ def _is_directed(kind: type) -> bool:
 
 Solved = tuple[ConsolidationKey, Consolidation[P]]
 """A consolidation solved away from the fleet, with the key of the job it answers."""
+
+
+def _new_epoch(learning: Learning[P], policy: ConsolidationPolicy, now: int) -> None:
+    """Start a new epoch of ``learning`` at its count ``now`` (a shift test found that
+    the demand moved): the reservoir keeps its last block, the schedule starts again and
+    nothing of the demand before is expected."""
+    learning.run = NO_SHIFT_RUN
+    recent = list(learning.reservoir)[-policy.block :]
+    learning.reservoir.clear()
+    learning.reservoir.extend(recent)
+    kept = list(learning.partners)[-policy.block :]
+    learning.partners.clear()
+    learning.partners.extend(kept)
+    learning.epoch = now
+    learning.next_consolidation = now + policy.first
+    learning.baseline = None
+    learning.fitted = 0
+    learning.served, learning.wins, learning.won = None, [], 0
 
 
 def _run_of(data: Any) -> ShiftRun:

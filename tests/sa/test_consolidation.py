@@ -876,6 +876,9 @@ def test_policy_round_trip() -> None:
         ConsolidationPolicy(hasten=None),
         ConsolidationPolicy(hasten=4.5),
         ConsolidationPolicy(shared_targets=False),
+        ConsolidationPolicy(full_fit_settles=False),
+        ConsolidationPolicy(share_alpha=None),
+        ConsolidationPolicy(share_alpha=1e-4),
     ):
         data = json.loads(json.dumps(policy.to_dict()))
         assert ConsolidationPolicy.from_dict(data) == policy
@@ -893,6 +896,8 @@ def test_policy_round_trip() -> None:
         unfitted_confidence=0.0,
         hasten=None,
         shared_targets=False,
+        full_fit_settles=False,
+        share_alpha=None,
     )
     assert ConsolidationPolicy.from_dict({"confidence": 0.5}).settled_confidence == 0.5
     assert ConsolidationPolicy.from_dict({"longest": 300}).slowest == 300
@@ -903,6 +908,12 @@ def test_policy_round_trip() -> None:
         {"fresh_baseline": 1},
         {"checked_moves": "yes"},
         {"shared_targets": 1},
+        {"full_fit_settles": "true"},
+        {"share_alpha": 0.0},
+        {"share_alpha": 1.0},
+        {"share_alpha": True},
+        {"share_alpha": "1e-9"},
+        {"share_alpha": math.nan},
         {"shakes": 2.0},
         {"shakes": True},
         {"slowest": "32000"},
@@ -1186,11 +1197,11 @@ def test_a_consolidation_taken_with_a_large_gain_restarts_the_epochs_clock(
 def test_a_settled_demand_asks_more_of_a_consolidation(
     space: RoadSpace, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    policy = small_calm(settled_confidence=2.0, unfitted_confidence=0.0)
+    policy = small_calm(settled_confidence=2.0, unfitted_confidence=0.0, full_fit_settles=False)
     # by hand: the epoch's clock is a quarter of its targets, settled from 400 targets on
-    assert policy.confidence_at(due=396, epoch=0, fitted=True) == 0.0  # 99
-    assert policy.confidence_at(due=400, epoch=0, fitted=True) == 2.0  # 100
-    assert policy.confidence_at(due=1000, epoch=700, fitted=True) == 0.0  # a new epoch: 75
+    assert policy.confidence_at(due=396, epoch=0, fitted=400) == 0.0  # 99
+    assert policy.confidence_at(due=400, epoch=0, fitted=1) == 2.0  # 100
+    assert policy.confidence_at(due=1000, epoch=700, fitted=400) == 0.0  # a new epoch: 75
     asked: list[tuple[int, float]] = []
 
     def recording(
@@ -1208,17 +1219,56 @@ def test_a_settled_demand_asks_more_of_a_consolidation(
     assert {c for _, c in asked} == {0.0, 2.0}
 
 
+def test_references_fitted_to_a_full_reservoir_ask_the_settled_confidence(
+    space: RoadSpace, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A fit of a reservoir no larger is no better an estimate: once a consolidation
+    fitted the references to a full reservoir, the next ask ``settled_confidence`` before
+    the epoch's clock is settled (``full_fit_settles``)."""
+    policy = small_calm(longest=400, settled_confidence=2.0, unfitted_confidence=0.0)
+    # by hand: the clock settles from 1,600 targets on; a fit of all 400 settles at once
+    assert policy.confidence_at(due=500, epoch=0, fitted=400) == 2.0
+    assert policy.confidence_at(due=500, epoch=0, fitted=399) == 0.0
+    assert policy.confidence_at(due=1600, epoch=0, fitted=1) == 2.0
+    unsettling = dataclasses.replace(policy, full_fit_settles=False)
+    assert unsettling.confidence_at(due=500, epoch=0, fitted=400) == 0.0
+    asked: list[tuple[int, int, float]] = []
+
+    def recording(
+        space_: Any, positions: Any, anchor: Any, reservoir: Any, **kw: Any
+    ) -> Consolidation[NetPosition]:
+        learning = fleet.state.learning
+        assert learning is not None
+        asked.append((fleet.state.targets, learning.fitted, kw["confidence"]))
+        return consolidate(space_, positions, anchor, reservoir, **kw)
+
+    monkeypatch.setattr("routing_svc.sa.consolidation.consolidate", recording)
+    _, stream = demand_stream(5, 1500)
+    for settles in (True, False):
+        asked.clear()
+        fleet = consolidating_fleet(
+            space, policy=dataclasses.replace(policy, full_fit_settles=settles)
+        )
+        for z in stream:
+            fleet.observe(z)
+        assert all(k < 1600 for k, _, _ in asked)  # the clock never settles here
+        full = [c for _, fitted, c in asked if fitted >= 400]
+        assert full, "no consolidation fitted the references to a full reservoir"
+        assert set(full) == ({2.0} if settles else {0.0})
+        assert {c for _, fitted, c in asked if fitted < 400} == {0.0}
+
+
 def test_references_no_consolidation_fitted_ask_more_and_hold_still(
     space: RoadSpace, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     policy = small_calm(unfitted_confidence=2.5)
     # by hand: the larger of the epoch's confidence and the unfitted one, until a fit
-    assert policy.confidence_at(due=396, epoch=0, fitted=False) == 2.5
-    assert policy.confidence_at(due=396, epoch=0, fitted=True) == 0.0
-    assert policy.confidence_at(due=400, epoch=0, fitted=False) == 2.5  # settled: 1.0
-    assert policy.confidence_at(due=400, epoch=0, fitted=True) == 1.0
+    assert policy.confidence_at(due=396, epoch=0, fitted=0) == 2.5
+    assert policy.confidence_at(due=396, epoch=0, fitted=1) == 0.0
+    assert policy.confidence_at(due=400, epoch=0, fitted=0) == 2.5  # settled: 1.0
+    assert policy.confidence_at(due=400, epoch=0, fitted=1) == 1.0
     settled_high = ConsolidationPolicy(settled_confidence=3.0, unfitted_confidence=2.5)
-    assert settled_high.confidence_at(due=50_000, epoch=0, fitted=False) == 3.0
+    assert settled_high.confidence_at(due=50_000, epoch=0, fitted=0) == 3.0
     asked: list[tuple[int, int, float]] = []
 
     def recording(
