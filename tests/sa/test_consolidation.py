@@ -1029,15 +1029,22 @@ def consolidating_fleet(
     return Fleet.create(space, list(zip(fleet_vehicles, starts, strict=True)), config)
 
 
-CALM = ConsolidationPolicy(shift_ratio=1e9, hasten=None)
-"""The shift test never fires, and the epoch's clock never restarts."""
+CALM = ConsolidationPolicy(shift_ratio=1e9, hasten=None, share_alpha=None)
+"""The shift tests never fire, and the epoch's clock never restarts."""
 
 
 def small_calm(**changes: Any) -> ConsolidationPolicy:
     """A small reservoir on the schedule of periods of a quarter, no shift test: the
     schedules and confidences the tests below work out by hand."""
     base: dict[str, Any] = dict(
-        reservoir=400, first=50, growth=1.25, longest=100, block=50, shift_ratio=1e9, hasten=None
+        reservoir=400,
+        first=50,
+        growth=1.25,
+        longest=100,
+        block=50,
+        shift_ratio=1e9,
+        hasten=None,
+        share_alpha=None,
     )
     return ConsolidationPolicy(**{**base, **changes})
 
@@ -1572,7 +1579,7 @@ def test_a_shift_of_the_demand_starts_a_new_epoch(space: RoadSpace) -> None:
     )
     # a ratio of 2: the demand moving across the district costs several times more, while
     # the noise of a 250-target block of the stationary demand stays well below it
-    policy = ConsolidationPolicy(shift_ratio=2.0, hasten=None)
+    policy = ConsolidationPolicy(shift_ratio=2.0, hasten=None, share_alpha=None)
     fleet = consolidating_fleet(space, policy=policy)
     west = [fleet.observe(z) for z in west_targets]
     done = [o.target_number + 1 for o in west if o.consolidation is not None]
