@@ -375,13 +375,29 @@ class ConsolidationPolicy:
         excess = mean - self.shift_ratio * baseline
         return excess > 0.0 and excess > self.shift_confidence * math.sqrt(spread / size)
 
-    def shares_moved(self, wins: Sequence[int], served: Sequence[int]) -> bool:
+    def shares_moved(
+        self, wins: Sequence[int], served: Sequence[int], places: Sequence[object] = ()
+    ) -> bool:
         """Whether a block's ``wins`` per vehicle (whose reference was closest to each
         target) show that the demand moved: their G statistic
         ``2 sum_i w_i ln(w_i / (n pi_i))`` against the shares ``pi`` of the ``served``
         counts of the last fit (:func:`expected_shares`) exceeds the chi-square quantile
-        of ``1 - share_alpha`` with ``p - 1`` degrees of freedom; never without
-        :attr:`share_alpha` or with fewer than two vehicles."""
+        of ``1 - share_alpha`` with ``p - 1`` degrees of freedom (``p`` the vehicles, or
+        their distinct ``places``: vehicles that share a reference, at a stand, share
+        their wins and counts, however the ties between them fall); never without
+        :attr:`share_alpha` or with fewer than two places."""
+        if places:
+            cell: dict[object, int] = {}
+            merged_wins: list[int] = []
+            merged_served: list[int] = []
+            for place, won, count in zip(places, wins, served, strict=True):
+                at = cell.setdefault(place, len(merged_wins))
+                if at == len(merged_wins):
+                    merged_wins.append(0)
+                    merged_served.append(0)
+                merged_wins[at] += won
+                merged_served[at] += count
+            wins, served = merged_wins, merged_served
         if self.share_alpha is None or len(wins) < 2 or len(wins) != len(served):
             return False
         size = sum(wins)

@@ -922,7 +922,8 @@ class Fleet(Generic[P]):
             learning.wins[winner] += 1
             learning.won += 1
             if learning.won >= policy.block:
-                if policy.shares_moved(learning.wins, learning.served):
+                places = self._group_positions(learning)
+                if policy.shares_moved(learning.wins, learning.served, places):
                     _new_epoch(learning, policy, now)
                 learning.wins, learning.won = [], 0
         if now < learning.next_consolidation:

@@ -64,6 +64,11 @@ def test_the_test_of_the_winners_by_hand() -> None:
         for alpha in (1e-9, 1e-3, 0.5):
             moved = ConsolidationPolicy(share_alpha=alpha).shares_moved(wins, served)
             assert moved == (chi2.sf(g_statistic(wins, served), len(wins) - 1) < alpha)
+    # vehicles at one place (a stand) share their wins and counts, whichever wins a tie
+    assert policy.shares_moved([190, 0, 60], [0, 3000, 1000])
+    assert not policy.shares_moved([190, 0, 60], [0, 3000, 1000], ["a", "a", "b"])
+    assert policy.shares_moved([190, 0, 60], [0, 3000, 1000], ["a", "b", "c"])
+    assert not policy.shares_moved([250, 0], [0, 4000], ["a", "a"])  # one place: no test
     # no test without its probability, or of one vehicle
     assert not ConsolidationPolicy(share_alpha=None).shares_moved([250, 0], [0, 4000])
     assert not policy.shares_moved([250], [4000])
