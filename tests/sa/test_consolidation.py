@@ -1034,7 +1034,7 @@ CALM = ConsolidationPolicy(shift_ratio=1e9, hasten=None, share_alpha=None)
 
 
 def small_calm(**changes: Any) -> ConsolidationPolicy:
-    """A small reservoir on the schedule of periods of a quarter, no shift test: the
+    """A small reservoir on the schedule of periods of a quarter, no shift tests: the
     schedules and confidences the tests below work out by hand."""
     base: dict[str, Any] = dict(
         reservoir=400,
@@ -1226,6 +1226,26 @@ def test_a_settled_demand_asks_more_of_a_consolidation(
     assert {c for _, c in asked} == {0.0, 2.0}
 
 
+def record_confidences(
+    monkeypatch: pytest.MonkeyPatch,
+    asked: list[tuple[int, int, float]],
+    current: Callable[[], Fleet[NetPosition]],
+) -> None:
+    """Append to ``asked``, at each consolidation solved, the ``current`` fleet's target
+    count, the reservoir targets its references were fitted to and the confidence asked."""
+
+    def recording(
+        space_: Any, positions: Any, anchor: Any, reservoir: Any, **kw: Any
+    ) -> Consolidation[NetPosition]:
+        fleet = current()
+        learning = fleet.state.learning
+        assert learning is not None
+        asked.append((fleet.state.targets, learning.fitted, kw["confidence"]))
+        return consolidate(space_, positions, anchor, reservoir, **kw)
+
+    monkeypatch.setattr("routing_svc.sa.consolidation.consolidate", recording)
+
+
 def test_references_fitted_to_a_full_reservoir_ask_the_settled_confidence(
     space: RoadSpace, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -1240,16 +1260,7 @@ def test_references_fitted_to_a_full_reservoir_ask_the_settled_confidence(
     unsettling = dataclasses.replace(policy, full_fit_settles=False)
     assert unsettling.confidence_at(due=500, epoch=0, fitted=400) == 0.0
     asked: list[tuple[int, int, float]] = []
-
-    def recording(
-        space_: Any, positions: Any, anchor: Any, reservoir: Any, **kw: Any
-    ) -> Consolidation[NetPosition]:
-        learning = fleet.state.learning
-        assert learning is not None
-        asked.append((fleet.state.targets, learning.fitted, kw["confidence"]))
-        return consolidate(space_, positions, anchor, reservoir, **kw)
-
-    monkeypatch.setattr("routing_svc.sa.consolidation.consolidate", recording)
+    record_confidences(monkeypatch, asked, lambda: fleet)
     _, stream = demand_stream(5, 1500)
     for settles in (True, False):
         asked.clear()
@@ -1277,16 +1288,7 @@ def test_references_no_consolidation_fitted_ask_more_and_hold_still(
     settled_high = ConsolidationPolicy(settled_confidence=3.0, unfitted_confidence=2.5)
     assert settled_high.confidence_at(due=50_000, epoch=0, fitted=0) == 3.0
     asked: list[tuple[int, int, float]] = []
-
-    def recording(
-        space_: Any, positions: Any, anchor: Any, reservoir: Any, **kw: Any
-    ) -> Consolidation[NetPosition]:
-        learning = fleet.state.learning
-        assert learning is not None
-        asked.append((fleet.state.targets, learning.fitted, kw["confidence"]))
-        return consolidate(space_, positions, anchor, reservoir, **kw)
-
-    monkeypatch.setattr("routing_svc.sa.consolidation.consolidate", recording)
+    record_confidences(monkeypatch, asked, lambda: fleet)
     _, stream = demand_stream(5, 1500)
     runs = {}
     for unfitted in (2.5, 0.0):
