@@ -1298,7 +1298,7 @@ class Fleet(Generic[P]):
                     "served": None if learning.served is None else list(learning.served),
                     "wins": list(learning.wins),
                 }
-                if policy.share_alpha is not None and self._type_groups is None
+                if self._tests_winners()
                 else {}
             ),
             **({} if self._type_groups is None else {"seen": learning.seen}),
