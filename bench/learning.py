@@ -57,6 +57,7 @@ from typing import Any
 import httpx
 import numpy as np
 from bench_shared import NETWORKS, finished, network_file, network_name, refuse_unknown
+from continuous import ContinuousDemand, piece_starts, priced_along
 from continuous import continuous as along_the_road
 
 from routing_svc.demand import DemandDistribution
@@ -131,12 +132,12 @@ def instance(
     demand = network_demand(network, recipe, rng=np.random.default_rng([seed, 0]))
     optimum, matrix, sites = optimum_of(space, demand, n)
     if anywhere:
-        demand, optimum, matrix = anywhere_along(space, demand, n, optimum, sites)
+        demand, optimum, matrix, sites = anywhere_along(space, demand, n, optimum, sites)
     if shift and isinstance(recipe.form, Hotspots):  # the hotspots move: new centres
         shifted = network_demand(network, recipe, rng=np.random.default_rng([seed, 2]))
         shifted_optimum, shifted_matrix, shifted_sites = optimum_of(space, shifted, n)
         if anywhere:
-            shifted, shifted_optimum, shifted_matrix = anywhere_along(
+            shifted, shifted_optimum, shifted_matrix, shifted_sites = anywhere_along(
                 space, shifted, n, shifted_optimum, shifted_sites
             )
     else:  # a demand without centres to move (or not asked to) has no shift
@@ -165,19 +166,29 @@ def anywhere_along(
     n: int,
     optimum: tuple[float, list[NetPosition]],
     sites: list[NetPosition],
-) -> tuple[DemandDistribution[NetPosition], tuple[float, list[NetPosition]], FloatArray]:
-    """``demand`` drawn anywhere along the road, its optimum over the candidate ``sites``
-    of ``demand`` (or ``demand``'s own ``optimum``, priced on the fine model, where that
-    costs less) and the sites' cost matrix to its fine model."""
+) -> tuple[
+    DemandDistribution[NetPosition], tuple[float, list[NetPosition]], FloatArray, list[NetPosition]
+]:
+    """``demand`` drawn anywhere along the road, its optimum over the starts of the pieces
+    of the candidate ``sites`` of ``demand`` (:func:`continuous.piece_starts`, priced
+    exactly; or ``demand``'s own ``optimum``, priced by :func:`continuous.priced_along`,
+    where that costs less), the starts' cost matrix to its fine model, and the starts."""
     fine = along_the_road(space.network, demand)
-    best = solve_demand(space, fine, n, sites=sites)
+    starts = piece_starts(fine, sites)
+    best = solve_demand(space, demand, n, sites=starts)
     found = (best.objective, best.positions)
-    kept = expected_cost(space, optimum[1], np.ones(n), fine)
-    return fine, (kept, optimum[1]) if kept < found[0] else found, best.matrix
+    kept = priced_along(space, optimum[1], fine)
+    matrix = np.asarray(space.cost_matrix(starts, list(fine.positions)), dtype=np.float64)
+    return fine, (kept, optimum[1]) if kept < found[0] else found, matrix, starts
 
 
 def gap(space: RoadSpace, positions: list[NetPosition], demand: Any, optimum: float) -> float:
-    value = expected_cost(space, positions, np.ones(len(positions)), demand)
+    """The relative gap of ``positions`` to ``optimum`` on ``demand`` (targets anywhere
+    along the road: priced exactly, :func:`continuous.priced_along`)."""
+    if isinstance(demand, ContinuousDemand):
+        value = priced_along(space, positions, demand)
+    else:
+        value = expected_cost(space, positions, np.ones(len(positions)), demand)
     relative = relative_gap(value, optimum)
     assert relative is not None  # a degenerate instance (an optimum of 0) is not measured
     return relative
@@ -302,7 +313,8 @@ def degenerate(inst: Instance, n: int) -> str | None:
     optimum of one vehicle: ``n`` vehicles stand on (nearly) every demand atom, so that
     a fraction of a metre a target reads as a gap of many per cent.
     """
-    one = solve_demand(inst.space, inst.demand, 1, sites=inst.sites).objective
+    demand = inst.demand.coarse if isinstance(inst.demand, ContinuousDemand) else inst.demand
+    one = solve_demand(inst.space, demand, 1, sites=inst.sites).objective
     if inst.optimum[0] > 0.0 and inst.optimum[0] >= DEGENERATE_FRACTION * one:
         return None
     return (

@@ -15,12 +15,19 @@ from routing_svc.demand import DemandDistribution
 from routing_svc.demand.network import hotspot_mixture
 from routing_svc.network import RoadSpace, load_network
 from routing_svc.network.catalogue import resolve_network
-from routing_svc.optimum import expected_cost
+from routing_svc.optimum import expected_cost, solve_demand
 from routing_svc.types import NetPosition
 from tests.helpers import bench_report
 
 sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # after every other module
-from continuous import CONTINUOUS_PARTS, continuous
+from continuous import (
+    CONTINUOUS_PARTS,
+    ContinuousDemand,
+    continuous,
+    piece_bounds,
+    piece_starts,
+    priced_along,
+)
 
 
 def _town() -> tuple[RoadSpace, DemandDistribution[NetPosition]]:
@@ -98,6 +105,58 @@ def test_the_fine_model_prices_a_fleet_as_a_dense_sum_along_the_pieces() -> None
     at_atoms = expected_cost(space, fleet, np.ones(3), coarse)
     assert math.isclose(fine, dense, rel_tol=1.5e-3)
     assert abs(fine - dense) < abs(at_atoms - dense) / 3
+
+
+def _dense(
+    space: RoadSpace,
+    fleet: list[NetPosition],
+    coarse: DemandDistribution[NetPosition],
+    demand: ContinuousDemand,
+    points_a_piece: int = 400,
+) -> float:
+    """The expected cost as a dense midpoint sum of the exact costs along each piece."""
+    start, end = piece_bounds(demand)
+    points, weights = [], []
+    for j, z in enumerate(coarse.positions):
+        parts = (np.arange(points_a_piece) + 0.5) / points_a_piece
+        for x in start[j] + parts * (end[j] - start[j]):
+            points.append(NetPosition(z.edge, float(x)))
+            weights.append(coarse.weights[j] / points_a_piece)
+    total = float(np.asarray(weights) @ space.cost_matrix(fleet, points).min(axis=0))
+    return total / float(coarse.weights.sum())
+
+
+def test_priced_along_is_the_dense_sum_with_vehicles_inside_pieces() -> None:
+    """Twenty vehicles at drawn targets (inside pieces, on one-way and two-way streets,
+    the strictly directed model and the twin rule): the closed form against 400 points a
+    piece, and the fine model, which charges a loop to the part behind each vehicle,
+    further off."""
+    for name, either_way in (("oneway", True), ("grid", True), ("grid", False)):
+        network = load_network(resolve_network(name))
+        space = RoadSpace(network, either_way=either_way)
+        coarse = hotspot_mixture(network, rng=np.random.default_rng(3))
+        demand = continuous(network, coarse)
+        fleet = demand.sample(np.random.default_rng(9), 20)
+        dense = _dense(space, fleet, coarse, demand)
+        exact = priced_along(space, fleet, demand)
+        fine = expected_cost(space, fleet, np.ones(20), demand)
+        assert math.isclose(exact, dense, rel_tol=1e-4), (name, either_way)
+        assert abs(exact - dense) < abs(fine - dense) / 10, (name, either_way)
+
+
+def test_the_starts_of_the_pieces_are_priced_exactly_by_the_coarse_atoms() -> None:
+    """A p-median of the coarse atoms over the starts of their pieces costs, by its own
+    objective, what the closed form integrates along the pieces."""
+    network = load_network(resolve_network("oneway"))
+    space = RoadSpace(network)
+    coarse = hotspot_mixture(network, rng=np.random.default_rng(3))
+    demand = continuous(network, coarse)
+    starts = piece_starts(demand, list(coarse.positions))
+    assert len(starts) == len(coarse.positions)
+    pairs = zip(starts, coarse.positions, strict=True)
+    assert all(a.edge == z.edge and a.offset <= z.offset for a, z in pairs)
+    best = solve_demand(space, coarse, 5, sites=starts)
+    assert math.isclose(best.objective, priced_along(space, best.positions, demand), rel_tol=1e-9)
 
 
 def test_learning_bench_measures_targets_anywhere(tmp_path: Path) -> None:
