@@ -291,7 +291,11 @@ def main() -> int:
     p.add_argument(
         "--anywhere",
         action="store_true",
-        help="targets anywhere along the road, as bench/learning.py --anywhere",
+        help=(
+            "targets anywhere along the road, as bench/learning.py --anywhere, with its "
+            "optimum over the starts of the pieces; priced on the fine model (five atoms "
+            "a piece, the midpoint rule), as objective (11) needs its atoms"
+        ),
     )
     p.add_argument("--rest", action="store_true", help="add one cold curve through the REST API")
     args = p.parse_args()

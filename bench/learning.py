@@ -30,8 +30,8 @@ Run: ``python bench/learning.py`` (everything; long) or, e.g.,
 ``python bench/learning.py --nets drt,bologna --seeds 0,1 --targets 10000``; a network
 of your own is ``--nets town=town.net.xml.gz``; ``--cost time`` prices every path in
 free-flow travel time instead of metres; ``--anywhere`` draws targets anywhere along the
-road, not at the demand's atoms only (:mod:`continuous`), each gap then on a fine model of
-that demand.
+road, not at the demand's atoms only (:mod:`continuous`), each gap then integrated
+exactly along the demand's pieces of road (:func:`continuous.priced_along`).
 """
 
 from __future__ import annotations
@@ -121,7 +121,8 @@ def instance(
 ) -> Instance:
     """The instance of ``net`` for ``n`` vehicles and ``seed``; ``shift=False`` leaves
     the shifted demand unsolved (it is then the demand itself); ``anywhere``: targets
-    anywhere along the road (:func:`continuous.continuous`), priced by its fine model."""
+    anywhere along the road (:func:`continuous.continuous`), priced exactly along its
+    pieces (:func:`continuous.priced_along`)."""
     network = load_network(network_file(net))
     space = RoadSpace(network, cost=cost)
     recipe = parse_demand_spec(spec)
