@@ -85,28 +85,6 @@ def test_the_fine_model_splits_each_atom_evenly_along_its_piece() -> None:
         assert np.allclose(demand.weights[k * j : k * (j + 1)], demand.coarse.weights[j] / k)
 
 
-def test_the_fine_model_prices_a_fleet_as_a_dense_sum_along_the_pieces() -> None:
-    """Three vehicles at the heaviest atoms of a one-way network: the expected cost on the
-    fine model against 200 points a piece (on a one-way street the half of a piece behind
-    a vehicle costs a loop round the block, which the coarse atoms do not see)."""
-    network = load_network(resolve_network("oneway"))
-    space = RoadSpace(network)
-    coarse = hotspot_mixture(network, rng=np.random.default_rng(3))
-    demand = continuous(network, coarse)
-    fleet = [coarse.positions[int(i)] for i in np.argsort(coarse.weights)[::-1][:3]]
-    points, weights = [], []
-    for j, z in enumerate(coarse.positions):
-        half = demand.pieces[j] / 2
-        for x in np.linspace(z.offset - half, z.offset + half, 200):
-            points.append(NetPosition(z.edge, float(min(max(x, 0.0), demand.lengths[j]))))
-            weights.append(coarse.weights[j] / 200)
-    dense = float(np.asarray(weights) @ space.cost_matrix(fleet, points).min(axis=0))
-    fine = expected_cost(space, fleet, np.ones(3), demand)
-    at_atoms = expected_cost(space, fleet, np.ones(3), coarse)
-    assert math.isclose(fine, dense, rel_tol=1.5e-3)
-    assert abs(fine - dense) < abs(at_atoms - dense) / 3
-
-
 def _dense(
     space: RoadSpace,
     fleet: list[NetPosition],
@@ -124,6 +102,22 @@ def _dense(
             weights.append(coarse.weights[j] / points_a_piece)
     total = float(np.asarray(weights) @ space.cost_matrix(fleet, points).min(axis=0))
     return total / float(coarse.weights.sum())
+
+
+def test_the_fine_model_prices_a_fleet_as_a_dense_sum_along_the_pieces() -> None:
+    """Three vehicles at the heaviest atoms of a one-way network: the expected cost on the
+    fine model against 200 points a piece (on a one-way street the half of a piece behind
+    a vehicle costs a loop round the block, which the coarse atoms do not see)."""
+    network = load_network(resolve_network("oneway"))
+    space = RoadSpace(network)
+    coarse = hotspot_mixture(network, rng=np.random.default_rng(3))
+    demand = continuous(network, coarse)
+    fleet = [coarse.positions[int(i)] for i in np.argsort(coarse.weights)[::-1][:3]]
+    dense = _dense(space, fleet, coarse, demand, points_a_piece=200)
+    fine = expected_cost(space, fleet, np.ones(3), demand)
+    at_atoms = expected_cost(space, fleet, np.ones(3), coarse)
+    assert math.isclose(fine, dense, rel_tol=1.5e-3)
+    assert abs(fine - dense) < abs(at_atoms - dense) / 3
 
 
 def test_priced_along_is_the_dense_sum_with_vehicles_inside_pieces() -> None:
