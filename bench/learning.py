@@ -317,16 +317,23 @@ def anchor_gaps(inst: Instance, n: int, seed: int, targets: int) -> dict[str, An
             out["demand_sites"][name][label] = gap(
                 inst.space, _batch_answer(costs, weights, n, sites), demand, optimum
             )
-            own = candidate_sites(
-                inst.space.network,
-                DemandDistribution("seen", tuple(seen), weights / weights.sum()),
-                max_sites=MAX_SITES,
-            )
-            costs = inst.space.cost_matrix(own, seen)
-            out[name][label] = gap(
-                inst.space, _batch_answer(costs, weights, n, own), demand, optimum
-            )
+            own = targets_batch_answer(inst.space, seen, weights, n)
+            out[name][label] = gap(inst.space, own, demand, optimum)
     return out
+
+
+def targets_batch_answer(
+    space: RoadSpace, seen: list[NetPosition], weights: FloatArray, n: int
+) -> list[NetPosition]:
+    """The p-median of the distinct targets ``seen`` (each weighted by how often it came)
+    over their own candidate sites: themselves and the edge ends (:func:`candidate_sites`,
+    at most :data:`MAX_SITES`)."""
+    sites = candidate_sites(
+        space.network,
+        DemandDistribution("seen", tuple(seen), weights / weights.sum()),
+        max_sites=MAX_SITES,
+    )
+    return _batch_answer(space.cost_matrix(sites, seen), weights, n, sites)
 
 
 def _batch_answer(

@@ -4,11 +4,21 @@ its medians an instance whose relative gaps would mean nothing."""
 
 from __future__ import annotations
 
+import itertools
+import math
+import sys
+from collections import Counter
 from pathlib import Path
 
+import numpy as np
 import sumo
 
+from routing_svc.demand import DemandDistribution
+from routing_svc.optimum import candidate_sites
 from tests.helpers import bench_report
+
+sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # after every other module
+from learning import instance, targets_batch_answer
 
 
 def test_rest_curve_keeps_standard_output_json(tmp_path: Path) -> None:
@@ -45,3 +55,28 @@ def test_instances_without_a_meaningful_gap_are_not_measured(tmp_path: Path) -> 
     rules = {r["network"]: r["rules"] for r in report["records"]}
     assert rules["grid6"] == rules["ingolstadt"] == {}
     assert set(rules["grid"]) == {"consolidating", "probe"}
+
+
+def test_the_batch_answer_is_the_p_median_of_the_targets_over_their_own_sites() -> None:
+    """Two vehicles, 60 targets of ``grid``'s three hotspots: the batch answer serves the
+    targets as well as the best of every pair of their candidate sites (the targets and
+    the edge ends), found by brute force, and stands only on such sites. Both of its
+    references stand on edge ends here, where no target came."""
+    inst = instance("grid", 2, 0, shift=False)
+    counts = Counter(inst.demand.sample(np.random.default_rng(21), 60))
+    seen = list(counts)
+    weights = np.array([counts[z] for z in seen], dtype=np.float64)
+    sites = candidate_sites(
+        inst.space.network, DemandDistribution.of_targets("seen", seen), max_sites=None
+    )
+    assert len(sites) <= 1500  # every site is offered: the brute force is exact
+    costs = np.asarray(inst.space.cost_matrix(sites, seen))
+    best = min(
+        float(np.minimum(costs[i], costs[j]) @ weights)
+        for i, j in itertools.combinations(range(len(sites)), 2)
+    )
+    answer = targets_batch_answer(inst.space, seen, weights, 2)
+    served = np.asarray(inst.space.cost_matrix(answer, seen)).min(axis=0) @ weights
+    assert math.isclose(float(served), best, rel_tol=1e-9)
+    assert set(answer) <= set(sites)
+    assert not set(answer) & set(seen)
