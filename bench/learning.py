@@ -70,7 +70,6 @@ from routing_svc.network import CompiledNetwork, RoadSpace, load_network
 from routing_svc.network.costs import CostKind
 from routing_svc.optimum import (
     MAX_SITES,
-    candidate_sites,
     expected_cost,
     solve_demand,
     solve_pmedian,
@@ -275,8 +274,8 @@ def anchor_gaps(inst: Instance, n: int, seed: int, targets: int) -> dict[str, An
     """The batch answer (p-median of all targets so far) at the checkpoints of each stream.
 
     ``cold`` and ``shift``: over the candidate sites of the targets themselves (the
-    targets seen and the ends of the edges, :func:`candidate_sites`), all that a batch
-    solve of them knows; ``demand_sites``: the same targets over the demand's candidate
+    targets seen and the ends of the edges, :func:`targets_batch_answer`), all that a
+    batch solve of them knows; ``demand_sites``: the same targets over the demand's candidate
     sites (its atoms and the edge ends, or the starts of their pieces), which a batch
     solve of the targets does not know.
     """
@@ -317,23 +316,17 @@ def anchor_gaps(inst: Instance, n: int, seed: int, targets: int) -> dict[str, An
             out["demand_sites"][name][label] = gap(
                 inst.space, _batch_answer(costs, weights, n, sites), demand, optimum
             )
-            own = targets_batch_answer(inst.space, seen, weights, n)
+            own = targets_batch_answer(inst.space, seq[:k], n)
             out[name][label] = gap(inst.space, own, demand, optimum)
     return out
 
 
-def targets_batch_answer(
-    space: RoadSpace, seen: list[NetPosition], weights: FloatArray, n: int
-) -> list[NetPosition]:
-    """The p-median of the distinct targets ``seen`` (each weighted by how often it came)
-    over their own candidate sites: themselves and the edge ends (:func:`candidate_sites`,
-    at most :data:`MAX_SITES`)."""
-    sites = candidate_sites(
-        space.network,
-        DemandDistribution("seen", tuple(seen), weights / weights.sum()),
-        max_sites=MAX_SITES,
-    )
-    return _batch_answer(space.cost_matrix(sites, seen), weights, n, sites)
+def targets_batch_answer(space: RoadSpace, targets: list[NetPosition], n: int) -> list[NetPosition]:
+    """The p-median of ``targets`` (their empirical distribution) over their own candidate
+    sites, the targets and the edge ends (:func:`solve_demand`'s, at most
+    :data:`MAX_SITES`), by the heuristic: the batch answer of the targets seen."""
+    seen = DemandDistribution.of_targets("seen", targets)
+    return solve_demand(space, seen, n, method="heuristic").positions
 
 
 def _batch_answer(

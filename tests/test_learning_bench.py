@@ -63,7 +63,8 @@ def test_the_batch_answer_is_the_p_median_of_the_targets_over_their_own_sites() 
     the edge ends), found by brute force, and stands only on such sites. Both of its
     references stand on edge ends here, where no target came."""
     inst = instance("grid", 2, 0, shift=False)
-    counts = Counter(inst.demand.sample(np.random.default_rng(21), 60))
+    targets = inst.demand.sample(np.random.default_rng(21), 60)
+    counts = Counter(targets)
     seen = list(counts)
     weights = np.array([counts[z] for z in seen], dtype=np.float64)
     sites = candidate_sites(
@@ -75,7 +76,7 @@ def test_the_batch_answer_is_the_p_median_of_the_targets_over_their_own_sites() 
         float(np.minimum(costs[i], costs[j]) @ weights)
         for i, j in itertools.combinations(range(len(sites)), 2)
     )
-    answer = targets_batch_answer(inst.space, seen, weights, 2)
+    answer = targets_batch_answer(inst.space, targets, 2)
     served = np.asarray(inst.space.cost_matrix(answer, seen)).min(axis=0) @ weights
     assert math.isclose(float(served), best, rel_tol=1e-9)
     assert set(answer) <= set(sites)
