@@ -80,7 +80,7 @@ from routing_svc.sa.space import P
 from routing_svc.sa.stands import StandSet, capacitated_sites, open_count, stand_assignment
 from routing_svc.types import FloatArray, IntArray
 
-MAX_SITE_TARGETS = 600
+MAX_SITE_TARGETS = 1500
 """Reservoir targets offered as candidate references (with the ends of their edges);
 beyond, an evenly spaced subset of the distinct targets, so that a consolidation's cost
 is bounded whatever the spread of the demand."""
