@@ -68,12 +68,7 @@ from routing_svc.demand.spec import DemandRecipe, Hotspots, network_demand, pars
 from routing_svc.errors import InvalidInput
 from routing_svc.network import CompiledNetwork, RoadSpace, load_network
 from routing_svc.network.costs import CostKind
-from routing_svc.optimum import (
-    MAX_SITES,
-    expected_cost,
-    solve_demand,
-    solve_pmedian,
-)
+from routing_svc.optimum import MAX_SITES, expected_cost, solve_demand, solve_pmedian
 from routing_svc.optimum import gap as relative_gap
 from routing_svc.sa import Fleet, Objective, Rule, Vehicle, learning_config
 from routing_svc.types import FloatArray, NetPosition
