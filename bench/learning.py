@@ -22,12 +22,14 @@ less the batch answer's median gap (``behind_anchor_from_1000``), and the median
 over seeds of each seed's gap less the batch answer of its own targets
 (``behind_anchor_paired_from_1000``). The same targets solved over the demand's
 candidate sites, which no batch solve of the targets knows, give the
-``demand_site_anchor`` and its two distances. An instance without an optimum to compare with
-(more vehicles than the network has candidate sites) or whose optimum costs under
-:data:`DEGENERATE_FRACTION` of one vehicle's (more vehicles than the demand has
-places) is not measured: its record says why, and the summary lists it under
-``not_measured``. ``--rest`` adds one curve through the REST API of a live
-``routing-svc serve`` (``targets:batch``).
+``demand_site_anchor`` and its two distances. ``fit_behind_anchor_paired_from_1000`` tells
+the two causes of such a distance apart: how much more the rule's references cost than the
+batch answer's on the very targets seen (paired; at most 0 where the rule fits them as well).
+An instance without an optimum to compare with (more vehicles than the network has
+candidate sites) or whose optimum costs under :data:`DEGENERATE_FRACTION` of one
+vehicle's (more vehicles than the demand has places) is not measured: its record says
+why, and the summary lists it under ``not_measured``. ``--rest`` adds one curve through
+the REST API of a live ``routing-svc serve`` (``targets:batch``).
 
 Run: ``python bench/learning.py`` (everything; long) or, e.g.,
 ``python bench/learning.py --nets drt,bologna --seeds 0,1 --targets 10000``; a network
@@ -198,10 +200,19 @@ def gap(space: RoadSpace, positions: list[NetPosition], demand: Any, optimum: fl
     return relative
 
 
+def sample_cost(
+    space: RoadSpace, positions: list[NetPosition], targets: list[NetPosition]
+) -> float:
+    """The mean cost of ``targets`` from their closest of ``positions``: objective (11) on the
+    targets' empirical distribution, what a batch solve of them minimises."""
+    return float(space.cost_matrix(positions, targets).min(axis=0).mean())
+
+
 def run_rule(
     inst: Instance, rule: str, scenario: str, n: int, seed: int, targets: int
 ) -> dict[str, Any]:
-    """One fleet of ``rule`` from ``scenario``'s start; its gaps at the checkpoints."""
+    """One fleet of ``rule`` from ``scenario``'s start; its gaps at the checkpoints (and,
+    from a cold start, its :func:`sample_cost` on the targets seen)."""
     space = inst.space
     config = learning_config(
         rule, typical_cost=space.typical_cost(), n_vehicles=n, objective=Objective(1.0), seed=seed
@@ -216,6 +227,7 @@ def run_rule(
         stream = inst.demand.sample(rng, targets)
         marks = {k: str(k) for k in CHECKPOINTS if k <= targets}
     gaps: dict[str, float] = {}
+    fits: dict[str, float] = {}
     seconds = consolidating = 0.0
     made = accepted = 0
     _warm_up(inst, config, start, stream)
@@ -234,9 +246,12 @@ def run_rule(
             demand = inst.shifted if after else inst.demand
             optimum = inst.shifted_optimum[0] if after else inst.optimum[0]
             gaps[marks[k]] = gap(space, fleet.state.positions, demand, optimum)
+            if scenario == "cold":
+                fits[marks[k]] = sample_cost(space, fleet.state.positions, stream[:k])
     served = max(len(stream) - 1, 1)
     return {
         "gaps": gaps,
+        **({"sample_costs": fits} if fits else {}),
         "microseconds_per_target": 1e6 * seconds / served,
         "step_microseconds_per_target": 1e6 * (seconds - consolidating) / max(served - made, 1),
         "consolidations": made,
@@ -272,10 +287,16 @@ def anchor_gaps(inst: Instance, n: int, seed: int, targets: int) -> dict[str, An
     targets seen and the ends of the edges, :func:`targets_batch_answer`), all that a
     batch solve of them knows; ``demand_sites``: the same targets over the demand's candidate
     sites (its atoms and the edge ends, or the starts of their pieces), which a batch
-    solve of the targets does not know.
+    solve of the targets does not know; ``sample_costs``: the ``cold`` batch answer's
+    :func:`sample_cost` on the targets it was solved from.
     """
     rng = np.random.default_rng([seed, 1])
-    out: dict[str, Any] = {"cold": {}, "shift": {}, "demand_sites": {"cold": {}, "shift": {}}}
+    out: dict[str, Any] = {
+        "cold": {},
+        "shift": {},
+        "demand_sites": {"cold": {}, "shift": {}},
+        "sample_costs": {"cold": {}},
+    }
     stream = inst.demand.sample(rng, targets)
     rng = np.random.default_rng([seed, 1])
     shift_stream = inst.demand.sample(rng, SHIFT_AT) + inst.shifted.sample(rng, max(AFTER_SHIFT))
@@ -313,6 +334,8 @@ def anchor_gaps(inst: Instance, n: int, seed: int, targets: int) -> dict[str, An
             )
             own = targets_batch_answer(inst.space, seq[:k], n)
             out[name][label] = gap(inst.space, own, demand, optimum)
+            if name == "cold":
+                out["sample_costs"]["cold"][label] = sample_cost(inst.space, own, seq[:k])
     return out
 
 
@@ -437,6 +460,19 @@ def summarise(records: list[dict[str, Any]], rules: tuple[str, ...]) -> dict[str
                         for label in rs[0]["rules"][rule]["cold"]["gaps"]
                         if label in anchors[0]["cold"]
                     }
+                if all(
+                    "sample_costs" in x["rules"][rule]["cold"] and "sample_costs" in x["anchor"]
+                    for x in rs
+                ):  # records from before the fits were kept have none
+                    entry[rule]["fit_behind_anchor_paired"] = {
+                        label: statistics.median(
+                            x["rules"][rule]["cold"]["sample_costs"][label]
+                            / x["anchor"]["sample_costs"]["cold"][label]
+                            - 1.0
+                            for x in rs
+                        )
+                        for label in rs[0]["rules"][rule]["cold"]["sample_costs"]
+                    }
             for measure in ("microseconds_per_target", "step_microseconds_per_target"):
                 entry[rule][measure] = statistics.median(
                     statistics.mean(s[measure] for s in x["rules"][rule].values()) for x in rs
@@ -550,6 +586,24 @@ def goals(summary: dict[str, Any], rule: str, baseline: str) -> dict[str, Any]:
             value, where = max(found)
             out[name] = {"worst": value, "where": where, "goal": limit, "met": value <= limit}
     return out
+
+
+def fit_diagnostic(summary: dict[str, Any], rule: str) -> dict[str, Any] | None:
+    """How much more the rule's references cost on the targets seen than the batch answer's
+    (:func:`sample_cost`, paired per seed, relative; median over seeds), the worst network
+    from 1,000 targets on: at most 0 where the rule fits the targets as well as a batch
+    solve of them, so that a gap behind the batch answer is the spread of equally good
+    fits of a sample, not a worse fit. ``None`` without the fits."""
+    found = [
+        (v, f"{key}@{label}")
+        for key, e in summary["median_over_seeds"].items()
+        for label, v in e[rule].get("fit_behind_anchor_paired", {}).items()
+        if int(label) >= 1000
+    ]
+    if not found:
+        return None
+    value, where = max(found)
+    return {"worst": value, "where": where}
 
 
 def free_port() -> int:
@@ -768,6 +822,9 @@ def main() -> int:
         "shift": {"at": SHIFT_AT, "after": list(AFTER_SHIFT)},
         "optimum": f"best p-median found over at most {MAX_SITES} candidate sites",
         "goals": {rule: goals(summary, rule, "probe") for rule in rules},  # ratios need probe
+        "fit_behind_anchor_paired_from_1000": {
+            rule: fit_diagnostic(summary, rule) for rule in rules
+        },
         **summary,
     }
     report = finished(report, records, started)

@@ -15,10 +15,11 @@ import sumo
 
 from routing_svc.demand import DemandDistribution
 from routing_svc.optimum import candidate_sites
+from routing_svc.types import NetPosition
 from tests.helpers import bench_report
 
 sys.path.append(str(Path(__file__).resolve().parents[1] / "bench"))  # after every other module
-from learning import instance, targets_batch_answer
+from learning import instance, sample_cost, targets_batch_answer
 
 
 def test_rest_curve_keeps_standard_output_json(tmp_path: Path) -> None:
@@ -81,3 +82,41 @@ def test_the_batch_answer_is_the_p_median_of_the_targets_over_their_own_sites() 
     assert math.isclose(float(served), best, rel_tol=1e-9)
     assert set(answer) <= set(sites)
     assert not set(answer) & set(seen)
+
+
+def test_sample_cost_is_the_mean_cost_from_the_closest_reference() -> None:
+    """Hand-computed on one edge of ``grid``: a reference at its start and one at 30 m;
+    targets at 10 m (10 m from the first), 30 m (0 m) and 40 m (10 m from the second)
+    cost 20 / 3 m on average."""
+    space = instance("grid", 2, 0, shift=False).space
+    edge = next(e for e in range(space.network.n_edges) if space.network.length[e] > 50.0)
+    references = [NetPosition(edge, 0.0), NetPosition(edge, 30.0)]
+    targets = [NetPosition(edge, 10.0), NetPosition(edge, 30.0), NetPosition(edge, 40.0)]
+    assert math.isclose(sample_cost(space, references, targets), 20.0 / 3.0, rel_tol=1e-12)
+
+
+def test_the_fit_behind_the_batch_answer_is_paired_per_seed(tmp_path: Path) -> None:
+    """Each cold record keeps the fleet's and the batch answer's cost on the targets seen at
+    every checkpoint; the summary's median over seeds of their ratio less one is what the
+    records give, and its worst from 1,000 targets on is reported beside the goals."""
+    report, _ = bench_report(
+        "learning.py", tmp_path, "--nets", "grid", "--vehicles", "2", "--seeds", "0,1,2",
+        "--rules", "consolidating", "--scenarios", "cold", "--targets", "1000", "--jobs", "1",
+    )  # fmt: skip
+    records = report["records"]
+    ratios = {
+        label: sorted(
+            r["rules"]["consolidating"]["cold"]["sample_costs"][label]
+            / r["anchor"]["sample_costs"]["cold"][label]
+            - 1.0
+            for r in records
+        )[1]
+        for label in ("300", "1000")
+    }
+    entry = report["median_over_seeds"]["grid/2"]["consolidating"]["fit_behind_anchor_paired"]
+    assert entry == ratios
+    assert all(r["anchor"]["sample_costs"]["cold"]["1000"] > 0.0 for r in records)
+    assert report["fit_behind_anchor_paired_from_1000"]["consolidating"] == {
+        "worst": ratios["1000"],
+        "where": "grid/2@1000",
+    }
