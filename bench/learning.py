@@ -205,7 +205,8 @@ def sample_cost(
 ) -> float:
     """The mean cost of ``targets`` from their closest of ``positions``: objective (11) on the
     targets' empirical distribution, what a batch solve of them minimises."""
-    return float(space.cost_matrix(positions, targets).min(axis=0).mean())
+    seen = DemandDistribution.of_targets("seen", targets)
+    return expected_cost(space, positions, np.ones(len(positions)), seen)
 
 
 def run_rule(
